@@ -1,0 +1,72 @@
+"""Camera and ray maths in numpy (no torch), shared by fitting, rendering and decoding.
+
+Conventions (as in Blender, NeRF-Synthetic and nerfstudio):
+- `c2w` is a camera-to-world matrix, float, shape (4, 4) or (N, 4, 4), OpenGL axes:
+  camera x right, y up, and the camera looks down its -z axis.
+- Intrinsics are pinhole `fx, fy, cx, cy` in pixels; pixel (u, v) has its centre at (u + 0.5, v + 0.5),
+  u to the right, v down, the image origin at the top-left corner.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["pixel_rays", "look_at", "orbit_poses", "focal_from_fov", "project"]
+
+
+def focal_from_fov(fov_x_rad: float, width: int) -> float:
+    """Focal length in pixels for a horizontal field of view `fov_x_rad` (radians) over `width` pixels."""
+    return 0.5 * width / np.tan(0.5 * fov_x_rad)
+
+
+def pixel_rays(c2w: np.ndarray, fx: float, fy: float, cx: float, cy: float, width: int, height: int):
+    """Rays through every pixel centre of one camera.
+
+    c2w: (4, 4) OpenGL camera-to-world. Returns `origins` and unit `dirs`, both (H*W, 3) float32,
+    row-major over (v, u).
+    """
+    assert c2w.shape == (4, 4), c2w.shape
+    u, v = np.meshgrid(np.arange(width, dtype=np.float64) + 0.5, np.arange(height, dtype=np.float64) + 0.5)
+    d_cam = np.stack([(u - cx) / fx, -(v - cy) / fy, -np.ones_like(u)], axis=-1).reshape(-1, 3)
+    dirs = d_cam @ c2w[:3, :3].T
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    origins = np.broadcast_to(c2w[:3, 3], dirs.shape)
+    return origins.astype(np.float32), dirs.astype(np.float32)
+
+
+def project(points: np.ndarray, c2w: np.ndarray, fx: float, fy: float, cx: float, cy: float):
+    """Project world points (N, 3) into a camera. Returns pixel coordinates (N, 2) as (u, v) in the
+    convention above (pixel centres at +0.5) and depth (N,) along the viewing axis (positive in front)."""
+    w2c = np.linalg.inv(c2w)
+    p = points @ w2c[:3, :3].T + w2c[:3, 3]
+    depth = -p[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = fx * p[:, 0] / depth + cx
+        v = -fy * p[:, 1] / depth + cy
+    return np.stack([u, v], axis=-1), depth
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """OpenGL camera-to-world (4, 4) for a camera at `eye` looking at `target`, with world `up`."""
+    eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
+    back = eye - target
+    back /= np.linalg.norm(back)
+    right = np.cross(up, back)
+    if np.linalg.norm(right) < 1e-8:  # looking straight along `up`: pick any right vector
+        right = np.cross([0.0, 1.0, 0.0], back)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(back, right)
+    c2w = np.eye(4)
+    c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = right, true_up, back, eye
+    return c2w
+
+
+def orbit_poses(n: int, radius: float, elevation_deg, target=(0.0, 0.0, 0.0), azimuth0_deg: float = 0.0,
+                up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """`n` cameras evenly spaced in azimuth around `target` (world z up), (n, 4, 4) float64.
+
+    `elevation_deg` is a scalar or a sequence of `n` elevations (degrees above the xy plane)."""
+    az = np.deg2rad(azimuth0_deg + 360.0 * np.arange(n) / n)
+    el = np.deg2rad(np.broadcast_to(np.asarray(elevation_deg, dtype=np.float64), (n,)))
+    target = np.asarray(target, dtype=np.float64)
+    eyes = target + radius * np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], -1)
+    return np.stack([look_at(e, target, up) for e in eyes])

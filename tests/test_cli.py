@@ -1,0 +1,82 @@
+"""The command line: one-line errors and non-zero exits for a user's mistakes; a real end-to-end run."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from snapshot3d import formats
+from snapshot3d.scene import Orbit, Scene, save_scene
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "snapshot3d", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
+
+
+def _assert_one_line_error(proc, match):
+    assert proc.returncode != 0
+    err = proc.stderr.strip()
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    assert match in err, err
+
+
+def test_fit_missing_path(tmp_path):
+    proc = run("fit", str(tmp_path / "nope"), "-o", str(tmp_path / "x.s3d"))
+    _assert_one_line_error(proc, "scene not found")
+    assert not (tmp_path / "x.s3d").exists()
+
+
+def test_fit_malformed_transforms(tmp_path):
+    (tmp_path / "scene").mkdir()
+    (tmp_path / "scene" / "transforms.json").write_text('{"frames": [ {"file_path": ')
+    proc = run("fit", str(tmp_path / "scene"), "-o", str(tmp_path / "x.s3d"))
+    _assert_one_line_error(proc, "not valid JSON")
+
+
+def test_fit_unknown_builtin(tmp_path):
+    _assert_one_line_error(run("fit", "builtin:nothing", "-o", str(tmp_path / "x.s3d")), "builtin")
+
+
+def test_render_scene_from_other_decoder(tmp_path):
+    s = Scene(codes=np.zeros((3, 4, 8, 8), np.uint8), box=np.array([[-1, -1, -1], [1, 1, 1]]),
+              orbit=Orbit(radius=3.0), decoder_version="tri-dec-0")
+    save_scene(s, tmp_path / "old.s3d")
+    proc = run("render", str(tmp_path / "old.s3d"), "-o", str(tmp_path / "views"))
+    _assert_one_line_error(proc, "fitted for decoder 'tri-dec-0'")
+    assert not (tmp_path / "views").exists()
+    proc = run("mesh", str(tmp_path / "old.s3d"), "-o", str(tmp_path / "m.glb"))
+    _assert_one_line_error(proc, "fitted for decoder")
+
+
+def test_render_corrupt_scene(tmp_path):
+    (tmp_path / "bad.s3d").write_text("hello")
+    _assert_one_line_error(run("render", str(tmp_path / "bad.s3d"), "-o", str(tmp_path / "v")), "not a snapshot3d scene")
+
+
+def test_fit_render_mesh_end_to_end(tmp_path):
+    """A short real fit of the shipped default, then render and mesh from the written scene file."""
+    out = tmp_path / "p.s3d"
+    proc = run("fit", "builtin:procedural", "-o", str(out), "--size", "64", "--steps", "120", "--plane-res", "32",
+               "--plane-channels", "4", "--occ-warmup", "40", "--report", str(tmp_path / "fit.json"))
+    assert proc.returncode == 0, proc.stderr
+    rep = json.loads((tmp_path / "fit.json").read_text())
+    assert set(rep) == {"field_psnr", "field_ssim", "scene_kb", "fit_seconds", "steps", "plane_res", "plane_channels"}
+    assert rep["plane_res"] == 32 and rep["plane_channels"] == 4 and rep["steps"] == 120
+    assert rep["field_psnr"] > 18.0 and abs(rep["scene_kb"] - (3 * 4 * 32 * 32 + 36) / formats.KB) < 0.01
+    proc = run("render", str(out), "-o", str(tmp_path / "views"), "--views", "3", "--size", "48")
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in (tmp_path / "views").iterdir()) == ["000.png", "001.png", "002.png", "contact.png",
+                                                                     "turntable.gif"]
+    proc = run("mesh", str(out), "-o", str(tmp_path / "m.ply"), "--res", "48")
+    assert proc.returncode == 0, proc.stderr
+    import trimesh
+    mesh = trimesh.load(tmp_path / "m.ply")
+    assert len(mesh.faces) > 100
+    assert np.all(mesh.bounds[0] >= rep_box(out)[0] - 1e-4) and np.all(mesh.bounds[1] <= rep_box(out)[1] + 1e-4)
+
+
+def rep_box(path):
+    from snapshot3d.scene import load_scene_file
+    return load_scene_file(path).box

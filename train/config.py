@@ -1,0 +1,53 @@
+"""Typed configs of the training jobs (torch-free, so the CLI can build its options from them).
+
+Each field's `help` is its documentation and its `--option` text.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+__all__ = ["FitConfig", "DecoderConfig", "LADDER"]
+
+
+def _f(default, help: str):
+    return field(default=default, metadata={"help": help})
+
+
+@dataclass
+class FitConfig:
+    """Settings of one plane fit (stored in checkpoints)."""
+
+    plane_res: int = _f(64, "R: plane resolution (R x R per plane)")
+    plane_channels: int = _f(8, "C: channels per plane (at most formats.C_MAX)")
+    steps: int = _f(1500, "optimisation steps")
+    batch_rays: int = _f(4096, "rays per step")
+    lr: float = _f(0.04, "Adam learning rate of the plane values at the first step")
+    lr_final: float = _f(0.004, "learning rate at the last step (exponential decay)")
+    occ_every: int = _f(16, "steps between occupancy-grid updates")
+    occ_warmup: int = _f(128, "steps before the first occupancy update (all hull cells occupied until then)")
+    occupancy: bool = _f(True, "occupancy-based empty-space skipping (off: every sample in the box is evaluated)")
+    min_transmittance: float = _f(1e-3, "early ray termination: samples behind this transmittance are dropped (0: off)")
+    qat_fraction: float = _f(0.15, "last fraction of steps trained through the 8-bit rounding the snapshot carries")
+    fg_fraction: float = _f(0.75, "share of each batch drawn from rays that see the object (when masks exist)")
+    tv_weight: float = _f(1e-4, "total-variation weight on the planes")
+    empty_weight: float = _f(1.0, "weight of the density penalty at random points outside the visual hull")
+    seed: int = _f(0, "random seed")
+    checkpoint_every: int = _f(250, "steps between checkpoints")
+
+
+@dataclass
+class DecoderConfig:
+    """Joint training of the shared decoder over built-in scenes (spot and lego are held out)."""
+
+    scenes: tuple = _f(("procedural", "duck", "teapot", "bunny", "suzanne"), "builtin scenes trained on")
+    hidden: int = _f(32, "decoder width")
+    steps: int = _f(6000, "total steps, the scenes taken in turn")
+    plane_res: int = _f(64, "R of each training scene's planes")
+    nested: tuple = _f((4, 8, 12), "channel counts drawn each step, so that one decoder serves any C")
+    lr: float = _f(3e-3, "decoder Adam learning rate, decayed 10x over the run")
+    size: int = _f(200, "rendered view size of the training scenes")
+    seed: int = _f(0, "random seed")
+
+
+# `fit --budget auto`: (plane_res, plane_channels) from large to small; all within the paper's 160 kB.
+LADDER = ((64, 12), (64, 8), (48, 8), (48, 4), (32, 4))
