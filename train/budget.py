@@ -21,7 +21,14 @@ from .config import LADDER, FitConfig
 from .evaluate import evaluate_planes
 from .fit import fit, hull_grid
 
-__all__ = ["fit_ladder"]
+__all__ = ["fit_ladder", "choose_rung"]
+
+
+def choose_rung(rungs: list[dict], tolerance_db: float = 0.5) -> int:
+    """Index of the smallest rung (by scene_kb) whose field_psnr is within `tolerance_db` of the best."""
+    best = max(r["field_psnr"] for r in rungs)
+    ok = [i for i, r in enumerate(rungs) if r["field_psnr"] >= best - tolerance_db]
+    return min(ok, key=lambda i: rungs[i]["scene_kb"])
 
 
 def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=LADDER, tolerance_db: float = 0.5,
@@ -49,7 +56,4 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=LADDER, toler
                       "field_psnr": round(ev["field_psnr"], 3), "field_ssim": round(ev["field_ssim"], 4),
                       "fit_seconds": round(seconds, 1), "codes": res_.codes})
         log(f"ladder R={res} C={ch}: {kb:.1f} kB, field_psnr {ev['field_psnr']:.2f} dB, {seconds:.0f} s")
-    best = max(r["field_psnr"] for r in rungs)
-    ok = [i for i, r in enumerate(rungs) if r["field_psnr"] >= best - tolerance_db]
-    chosen = min(ok, key=lambda i: rungs[i]["scene_kb"])
-    return chosen, rungs
+    return choose_rung(rungs, tolerance_db), rungs

@@ -15,7 +15,9 @@ import torch
 
 from snapshot3d import formats
 from snapshot3d.carve import carve
+from snapshot3d.errors import UserError
 from snapshot3d.posed import PosedImages
+from snapshot3d.scene import quantize_planes
 
 from .config import FitConfig
 from .field import TriPlanes, decode, sample_planes, straight_through_8bit
@@ -126,20 +128,21 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     return float(mse.detach())
 
 
-def _save_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator):
+def _save_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, scene: str):
     tmp = path.with_name(path.name + ".partial")
-    torch.save({"cfg": asdict(cfg), "step": st.step, "planes": st.planes.state_dict(), "occ": st.occ.state_dict(),
+    torch.save({"cfg": asdict(cfg), "scene": scene, "step": st.step, "planes": st.planes.state_dict(), "occ": st.occ.state_dict(),
                 "opt": st.opt.state_dict(), "gen": gen.get_state(), "seconds": st.train_seconds,
                 "rays": st.rays, "samples": st.samples}, tmp)
     tmp.replace(path)
 
 
-def _load_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator) -> bool:
+def _load_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, scene: str) -> bool:
     if not path.is_file():
         return False
     ck = torch.load(path, weights_only=False)
-    if ck["cfg"] != asdict(cfg):
-        raise ValueError(f"checkpoint {path} was made with other settings; delete it or fit with the same settings")
+    if ck.get("cfg") != asdict(cfg) or ck.get("scene") != scene:
+        raise UserError(f"checkpoint {path} was made for another scene or other settings; "
+                        "delete it or fit with the same settings")
     st.planes.load_state_dict(ck["planes"]), st.occ.load_state_dict(ck["occ"]), st.opt.load_state_dict(ck["opt"])
     gen.set_state(ck["gen"])
     st.step, st.train_seconds, st.rays, st.samples = ck["step"], ck["seconds"], ck["rays"], ck["samples"]
@@ -156,8 +159,8 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     st = new_state(posed, cfg, init_planes, hull)
-    if checkpoint is not None and _load_ckpt(checkpoint, st, cfg, gen) and st.step >= cfg.occ_warmup:
-        pass  # occupancy grid restored with the rest
+    if checkpoint is not None:
+        _load_ckpt(checkpoint, st, cfg, gen, posed.name)
     log, ema = [], None
     while st.step < cfg.steps:
         mse = train_step(st, decoder, cfg, gen)
@@ -169,7 +172,6 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
             if progress is not None:
                 progress(st.step, psnr)
         if checkpoint is not None and st.step % cfg.checkpoint_every == 0:
-            _save_ckpt(checkpoint, st, cfg, gen)
-    from snapshot3d.scene import quantize_planes
+            _save_ckpt(checkpoint, st, cfg, gen, posed.name)
     codes = quantize_planes(st.planes.planes.detach().numpy())
     return FitResult(codes=codes, state=st, seconds=st.train_seconds, log=log)

@@ -1,0 +1,42 @@
+"""`--budget auto` selection and marching-cubes meshing on known inputs."""
+import numpy as np
+import pytest
+
+from snapshot3d.errors import UserError
+from snapshot3d.meshing import density_to_mesh, unit_grid
+from snapshot3d.train.budget import choose_rung
+from snapshot3d.train.config import LADDER
+
+
+def test_choose_smallest_rung_within_half_a_db():
+    rungs = [{"scene_kb": 147, "field_psnr": 33.0}, {"scene_kb": 98, "field_psnr": 32.7},
+             {"scene_kb": 55, "field_psnr": 32.4}, {"scene_kb": 12, "field_psnr": 29.0}]
+    assert choose_rung(rungs) == 1  # 32.4 is 0.6 dB below the best
+    assert choose_rung(rungs, tolerance_db=0.7) == 2
+    rungs[3]["field_psnr"] = 33.5  # the smallest is also the best
+    assert choose_rung(rungs) == 3
+
+
+def test_ladder_stays_within_the_papers_budget():
+    assert all(3 * c * r * r <= 160_000 for r, c in LADDER)
+    assert len(set(LADDER)) == len(LADDER) >= 4
+
+
+def test_marching_cubes_recovers_a_sphere():
+    g = 48
+    pts = unit_grid(g)
+    r = np.linalg.norm(pts, axis=1)
+    density = np.where(r < 0.5, 100.0, 0.0).reshape(g, g, g)
+    box = np.array([[0.0, 0.0, 0.0], [2.0, 4.0, 2.0]])  # world box: the mesh is scaled into it
+    mesh = density_to_mesh(density, 50.0, box, lambda p: np.tile([1.0, 0.0, 0.0], (len(p), 1)))
+    centre = mesh.vertices.mean(0)
+    np.testing.assert_allclose(centre, [1.0, 2.0, 1.0], atol=0.03)
+    radii = np.abs(mesh.vertices - centre) / (box[1] - box[0]) * 2  # back in unit coordinates
+    assert abs(np.median(np.linalg.norm(radii, axis=1)) - 0.5) < 0.03
+    assert mesh.is_watertight and mesh.volume > 0  # outward normals
+    assert np.all(mesh.visual.vertex_colors[:, :3] == [255, 0, 0])
+
+
+def test_empty_field_has_no_mesh():
+    with pytest.raises(UserError, match="no surface"):
+        density_to_mesh(np.zeros((8, 8, 8)), 1.0, np.array([[0, 0, 0], [1, 1, 1.0]]), lambda p: p)
