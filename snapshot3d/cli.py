@@ -8,6 +8,7 @@ import dataclasses
 import sys
 
 from .errors import UserError
+from .lazy import lazy_command as _run
 
 __all__ = ["main", "build_parser"]
 
@@ -22,13 +23,6 @@ def _add_dataclass_options(parser: argparse.ArgumentParser, cls) -> None:
         else:
             typ = {"int": int, "float": float, int: int, float: float}.get(f.type, str)
             parser.add_argument(flag, dest=f.name, type=typ, default=f.default, help=help_)
-
-
-def _run(module: str, func: str):
-    def go(args):
-        import importlib
-        return getattr(importlib.import_module(module), func)(args)
-    return go
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,6 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     bf = bsub.add_parser("fit", help="field_psnr against scene_kb and fit time, spot and lego; throughput")
     bf.add_argument("--out", default="bench/results", help="output folder")
     bf.add_argument("--quick", action="store_true", help="few steps, for a smoke run")
+    bf.add_argument("--scenes", default="spot,lego", help="comma-separated bench scenes; a subset writes fit_<names>.*")
+    bf.add_argument("--merge", action="store_true", help="only combine fit_<scene>.json files into fit.*")
     bf.set_defaults(func=_run("snapshot3d.train.bench", "bench_fit_command"))
 
     from snapshot3d.scanner.cli import add_bench_commands, add_commands  # torch-free option builders

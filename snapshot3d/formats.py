@@ -8,6 +8,10 @@ __all__ = [
     "SCENE_FORMAT_VERSION", "DECODER_VERSION", "C_MAX", "PLANE_AXES", "PLANE_NAMES", "PLANE_RANGE",
     "ORBIT_VIEWS", "ORBIT_SIZE", "ORBIT_ELEVATION_DEG", "ORBIT_FOV_DEG", "WORLD_UP", "BACKGROUND",
     "DENSITY_CLAMP", "RENDER_STEPS_PER_BOX", "OCC_RES", "OCC_ALPHA_THRESHOLD", "KB",
+    # sheet and scan (issue 3)
+    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "CODEC_ID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
+    "MARKER_GAP", "MARGIN_X", "MARGIN_Y", "COLUMN_LEFT", "COLUMN_RIGHT", "SHEET_BOX", "MARKER_ORIGINS",
+    "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "QR_MAGIC", "QR_SEP", "QR_FIELDS",
 ]
 
 SCENE_FORMAT_VERSION = 1
@@ -36,3 +40,47 @@ RENDER_STEPS_PER_BOX = 192  # samples along the longest ray through the (normali
 OCC_RES = 64                # occupancy grid cells per axis
 OCC_ALPHA_THRESHOLD = 0.01  # a cell is occupied when one step through it has alpha above this
 KB = 1000                   # scene_kb is in kilobytes of 1000 bytes
+
+# --- sheet and scan (issue 3) ---
+# The printed sheet (DESIGN 1.3): the snapshot in the middle, a column either side holding a corner
+# ArUco marker at the top and the bottom, the colour patches (left) and the QR code (right), with a
+# thin quiet zone around everything. Geometry is in "layout units" = pixels of the snapshot, with
+# the snapshot's top-left pixel corner at (0, 0) and x to the right, y down; a sheet image is the
+# layout scaled by an integer factor (each snapshot pixel printed as k x k dots).
+SNAPSHOT_SIZE = 380           # the codec's snapshot is SNAPSHOT_SIZE x SNAPSHOT_SIZE RGB (not ORBIT_SIZE)
+SHEET_FORMAT_VERSION = 1
+CODEC_ID = "none"             # placeholder until the codec exists (issue of the codec): no codec yet
+ARUCO_DICT = "DICT_4X4_50"    # cv2.aruco predefined dictionary of the sheet's markers
+# Marker ids by sheet format version; the four ids identify the format. Order: top-left, top-right,
+# bottom-right, bottom-left corner of the sheet (as seen upright).
+SHEET_MARKER_IDS = {1: (0, 1, 2, 3)}
+MARKER_SIZE = 78              # marker side (4x4 bits + 1-bit border = 6 cells of 13)
+MARKER_GAP = 8                # white gap between the snapshot and a column
+MARGIN_X = 12                 # quiet zone outside the columns (left and right)
+MARGIN_Y = 19                 # quiet zone above and below the snapshot
+COLUMN_LEFT = -(MARKER_GAP + MARKER_SIZE)   # x of the left column's left edge
+COLUMN_RIGHT = SNAPSHOT_SIZE + MARKER_GAP   # x of the right column's left edge
+# Layout box of the whole sheet: (x0, y0, x1, y1).
+SHEET_BOX = (COLUMN_LEFT - MARGIN_X, -MARGIN_Y, COLUMN_RIGHT + MARKER_SIZE + MARGIN_X, SNAPSHOT_SIZE + MARGIN_Y)
+# Top-left corner (x, y) of each marker, in SHEET_MARKER_IDS order.
+MARKER_ORIGINS = ((COLUMN_LEFT, 0), (COLUMN_RIGHT, 0), (COLUMN_RIGHT, SNAPSHOT_SIZE - MARKER_SIZE),
+                  (COLUMN_LEFT, SNAPSHOT_SIZE - MARKER_SIZE))
+# Colour patches: a grid of PATCH_ROWS x PATCH_COLS cells in the left column, row-major, sRGB in [0, 1].
+PATCH_COLOURS = (
+    (1.0, 1.0, 1.0), (0.0, 0.0, 0.0),
+    (0.8, 0.8, 0.8), (0.2, 0.2, 0.2),
+    (0.6, 0.6, 0.6), (0.4, 0.4, 0.4),
+    (1.0, 0.0, 0.0), (0.0, 1.0, 1.0),
+    (0.0, 1.0, 0.0), (1.0, 0.0, 1.0),
+    (0.0, 0.0, 1.0), (1.0, 1.0, 0.0),
+)
+PATCH_ROWS, PATCH_COLS = 6, 2
+PATCH_BOX = (COLUMN_LEFT, MARKER_SIZE + MARKER_GAP + 4, COLUMN_LEFT + MARKER_SIZE,
+             SNAPSHOT_SIZE - MARKER_SIZE - MARKER_GAP - 4)   # (x0, y0, x1, y1) of the patch grid
+QR_BOX = (COLUMN_RIGHT, (SNAPSHOT_SIZE - MARKER_SIZE) // 2, COLUMN_RIGHT + MARKER_SIZE,
+          (SNAPSHOT_SIZE + MARKER_SIZE) // 2)                # the QR code's square, quiet zone outside it
+# QR payload: fields joined by QR_SEP; the first two are always present, the rest optional:
+#   "S3D<version>", codec id, "b=" scene box x0,y0,z0,x1,y1,z1, "o=" orbit radius,elevation_deg,fov_deg.
+QR_MAGIC = "S3D"
+QR_SEP = "|"
+QR_FIELDS = ("version", "codec", "box", "orbit")

@@ -4,7 +4,10 @@ import sys
 
 DECODE_PATH = ["snapshot3d.scanner", "snapshot3d.viewer", "snapshot3d.cameras", "snapshot3d.scene",
                "snapshot3d.formats", "snapshot3d.loaders", "snapshot3d.builtin", "snapshot3d.meshing",
-               "snapshot3d.images", "snapshot3d.metrics", "snapshot3d.cli"]
+               "snapshot3d.images", "snapshot3d.metrics", "snapshot3d.cli",
+               "snapshot3d.scanner.sheet", "snapshot3d.scanner.simulate", "snapshot3d.scanner.scan",
+               "snapshot3d.scanner.commands", "snapshot3d.scanner.bench", "snapshot3d.scanner.cli",
+               "snapshot3d.scanner.imageio_safe", "snapshot3d.scanner.colour", "snapshot3d.scanner.qr"]
 
 BLOCKER = """
 import sys

@@ -25,17 +25,17 @@ from .fit import fit, hull_grid
 
 __all__ = ["bench_fit_command", "BENCH_SCENES"]
 
-# name: (scene spec relative to ../shared/data or builtin, loader kwargs, default fit config)
+# name: (scene spec relative to ../shared/data or builtin, loader kwargs, fit config of the size sweep,
+#        step counts of the time sweep besides the size sweep's R64 C8 point)
 BENCH_SCENES = {
-    "spot": ("builtin:spot", {"size": 200}, FitConfig()),
-    "lego": ("scenes/lego_subset", {"downscale": 4}, FitConfig(steps=3000)),  # 20 views: more steps per view
+    "spot": ("builtin:spot", {"size": 200}, FitConfig(), (300, 750)),
+    "lego": ("scenes/lego_subset", {"downscale": 4}, FitConfig(), (300, 750, 3000)),  # 20 views: 3000 steps pays
 }
-STEP_SWEEP = (300, 750, 1500, 3000)  # plus the default steps, from the size sweep's R64 C8 point
 
 
 def _load(name):
     from snapshot3d.loaders import load_scene
-    spec, kw, cfg = BENCH_SCENES[name]
+    spec, kw, cfg, _ = BENCH_SCENES[name]
     if not spec.startswith("builtin:"):
         root = shared_data_dir()
         if root is None:
@@ -57,29 +57,24 @@ def _run_fit(posed, dec, cfg, hull):
             "occupancy": cfg.occupancy, "early_termination": cfg.min_transmittance > 0}
 
 
-def bench_scene(name: str, quick: bool, log=print) -> list[dict]:
+def bench_scene(name: str, quick: bool, save) -> None:
+    """Runs the sweeps of one scene, handing each result row to `save`."""
     posed, base = _load(name)
     dec = load_decoder()
     hull = hull_grid(posed)
-    rows = []
     scale = 0.1 if quick else 1.0
     sizes = LADDER[:2] if quick else LADDER
     for res, ch in sizes:  # accuracy against size
         cfg = replace(base, plane_res=res, plane_channels=ch, steps=max(50, int(base.steps * scale)))
-        rows.append({"scene": name, "sweep": "size", **_run_fit(posed, dec, cfg, hull)})
-        log(f"{name} size {rows[-1]}")
-    for steps in (STEP_SWEEP[:1] if quick else STEP_SWEEP):  # accuracy against time
-        if steps == base.steps:
-            continue
+        save({"scene": name, "sweep": "size", **_run_fit(posed, dec, cfg, hull)})
+    sweep = BENCH_SCENES[name][3]
+    for steps in (sweep[:1] if quick else sweep):  # accuracy against time
         cfg = replace(base, steps=max(50, int(steps * scale)))
-        rows.append({"scene": name, "sweep": "steps", **_run_fit(posed, dec, cfg, hull)})
-        log(f"{name} steps {rows[-1]}")
+        save({"scene": name, "sweep": "steps", **_run_fit(posed, dec, cfg, hull)})
     n = max(50, int(400 * scale))  # throughput: skipping on/off, same steps
     for occ, ert in ((True, True), (True, False), (False, False)):
         cfg = replace(base, steps=n, occupancy=occ, min_transmittance=1e-3 if ert else 0.0)
-        rows.append({"scene": name, "sweep": "throughput", **_run_fit(posed, dec, cfg, hull if occ else None)})
-        log(f"{name} throughput {rows[-1]}")
-    return rows
+        save({"scene": name, "sweep": "throughput", **_run_fit(posed, dec, cfg, hull if occ else None)})
 
 
 def _chart(rows, path: Path, cores: int):
@@ -112,21 +107,51 @@ def _chart(rows, path: Path, cores: int):
     fig.suptitle(f"snapshot3d bench fit — {cores} CPU cores, torch threads {torch.get_num_threads()}")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def merge_results(out: Path) -> list[dict]:
+    """Combine the per-scene results `fit_<scene>.json` (from parallel `--scenes` runs) into fit.*."""
+    parts = [json.loads((out / f"fit_{n}.json").read_text()) for n in BENCH_SCENES if (out / f"fit_{n}.json").is_file()]
+    if not parts:
+        raise UserError(f"--merge: no fit_<scene>.json in {out}")
+    rows = [r for p in parts for r in p["rows"]]
+    with open(out / "fit.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader(), w.writerows(rows)
+    meta = {**parts[0], "rows": rows, "command": [p["command"] for p in parts]}
+    (out / "fit.json").write_text(json.dumps(meta, indent=2))
+    _chart(rows, out / "fit.png", parts[0]["cpu_count"])
+    return rows
 
 
 def bench_fit_command(args) -> int:
     out = Path(args.out)
+    if args.merge:
+        merge_results(out)
+        print(f"wrote {out}/fit.csv, fit.json, fit.png")
+        return 0
     out.mkdir(parents=True, exist_ok=True)
     cores = os.cpu_count()
+    suffix = "" if args.scenes == ",".join(BENCH_SCENES) else "_" + args.scenes.replace(",", "_")
     rows = []
-    for name in BENCH_SCENES:
-        rows += bench_scene(name, args.quick, log=lambda m: print(m, flush=True))
-    with open(out / "fit.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader(), w.writerows(rows)
-    meta = {"cpu_count": cores, "torch_threads": torch.get_num_threads(), "quick": args.quick,
-            "configs": {k: asdict(v[2]) for k, v in BENCH_SCENES.items()}, "rows": rows}
-    (out / "fit.json").write_text(json.dumps(meta, indent=2))
-    _chart(rows, out / "fit.png", cores)
-    print(f"wrote {out}/fit.csv, fit.json, fit.png")
+
+    def save(row):  # results are written after every fit, so a long run leaves what it measured
+        rows.append(row)
+        print(f"{row['scene']} {row['sweep']}: {row}", flush=True)
+        with open(out / f"fit{suffix}.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader(), w.writerows(rows)
+        meta = {"cpu_count": cores, "torch_threads": torch.get_num_threads(), "quick": args.quick,
+                "command": f"snapshot3d bench fit --scenes {args.scenes}" + (" --quick" if args.quick else ""),
+                "configs": {k: asdict(v[2]) for k, v in BENCH_SCENES.items()},
+                "step_sweeps": {k: v[3] for k, v in BENCH_SCENES.items()}, "rows": rows}
+        (out / f"fit{suffix}.json").write_text(json.dumps(meta, indent=2))
+        _chart(rows, out / f"fit{suffix}.png", cores)
+
+    for name in args.scenes.split(","):
+        if name not in BENCH_SCENES:
+            raise UserError(f"--scenes: unknown bench scene {name!r} (choose from {', '.join(BENCH_SCENES)})")
+        bench_scene(name, args.quick, save)
+    print(f"wrote {out}/fit{suffix}.csv, .json, .png")
     return 0

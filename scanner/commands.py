@@ -1,0 +1,84 @@
+"""`snapshot3d simulate` and `snapshot3d scan`: argument handling, files and reports (no torch)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from snapshot3d.errors import UserError
+
+from .imageio_safe import read_image_bgr, write_atomic, write_image
+
+__all__ = ["simulate_command", "scan_command", "draw_overlay"]
+
+
+def _json_bytes(obj) -> bytes:
+    return (json.dumps(obj, indent=2) + "\n").encode()
+
+
+def simulate_command(args) -> int:
+    from .simulate import simulate
+
+    out = Path(args.output)
+    ext = out.suffix.lower()
+    if ext not in (".jpg", ".jpeg", ".png"):
+        raise UserError(f"cannot write {out.name}: use a .jpg or .png file name")
+    if args.severity == "none" and ext != ".png":
+        raise UserError("severity 'none' is lossless: write the photo as .png")
+    sheet = cv2.cvtColor(read_image_bgr(args.sheet), cv2.COLOR_BGR2RGB)
+    try:
+        data, kind, truth = simulate(sheet, args.severity, args.seed)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    if (kind == ".png") != (ext == ".png"):  # keep the channel's bytes; only change the container
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        ok, buf = cv2.imencode(ext if ext != ".jpeg" else ".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 100])
+        data = buf.tobytes()
+    if args.truth:
+        write_atomic(args.truth, _json_bytes(truth))
+    write_atomic(out, data)
+    print(f"wrote {out} ({truth['frame'][0]}x{truth['frame'][1]}, severity {args.severity}, seed {args.seed})")
+    return 0
+
+
+def draw_overlay(img_bgr: np.ndarray, result, max_side: int = 1600) -> np.ndarray:
+    """A downscaled (H', W', 3) uint8 RGB copy of the photo with the fitted markers, the snapshot's outline
+    (its top-left corner marked) and the confidence drawn on it."""
+    from . import layout
+
+    s = min(1.0, max_side / max(img_bgr.shape[:2]))
+    vis = cv2.resize(img_bgr, None, fx=s, fy=s, interpolation=cv2.INTER_AREA) if s < 1 else img_bgr.copy()
+    to = lambda p: np.round((np.asarray(p) + 0.5) * s - 0.5).astype(np.int32)  # noqa: E731
+    for mid, quad in layout.marker_corners().items():
+        cv2.polylines(vis, [to(result.fit.to_photo(quad))], True, (0, 200, 0) if mid in result.markers else (0, 0, 255), 2)
+    cv2.polylines(vis, [to(result.corners)], True, (255, 0, 255), 2)
+    cv2.circle(vis, tuple(int(v) for v in to(result.corners[0])), 8, (255, 0, 255), -1)
+    cv2.putText(vis, f"confidence {result.confidence:.2f}  reproj {result.reprojection_px:.2f}px", (10, 30),
+                cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 0, 255), 2)
+    return cv2.cvtColor(vis, cv2.COLOR_BGR2RGB)
+
+
+def scan_command(args) -> int:
+    from .scan import scan_image
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".png":
+        raise UserError(f"cannot write {out.name}: the rectified snapshot is written losslessly as .png")
+    import time
+
+    t0 = time.perf_counter()
+    img = read_image_bgr(args.photo)
+    dec = (time.perf_counter() - t0) * 1e3
+    res = scan_image(img)
+    res.timings_ms = {"decode": dec, **res.timings_ms, "total_with_decode": dec + res.timings_ms["total"]}
+    write_image(out, res.snapshot)
+    if args.debug:
+        write_image(args.debug, draw_overlay(img, res))
+    if args.report:
+        write_atomic(args.report, _json_bytes(res.report()))
+    qr = "QR unreadable" if res.qr is None else f"QR codec {res.qr['codec']!r}"
+    print(f"wrote {out} (confidence {res.confidence:.2f}, reprojection {res.reprojection_px:.2f} px, {qr}, "
+          f"{res.timings_ms['total']:.0f} ms + {dec:.0f} ms decoding)")
+    return 0

@@ -1,0 +1,133 @@
+"""Reading a user's photo without trusting it, and writing outputs atomically.
+
+`read_image_bgr` checks, before decoding, that the file exists, is an image (by its header, via
+Pillow's lazy open), is within MAX_PIXELS (a decompression bomb is refused before any pixel buffer
+is allocated) and, for JPEG and PNG, is complete (no truncation); then OpenCV decodes it. Every
+failure is a one-line `UserError` naming the cause."""
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from snapshot3d.errors import UserError
+
+__all__ = ["MAX_PIXELS", "MAX_BYTES", "read_image_bgr", "image_size", "write_atomic", "write_image"]
+
+MAX_PIXELS = 120_000_000   # larger than any phone's full-resolution photo (108 MP); 20000x20000 is refused
+MAX_BYTES = 300_000_000    # file size limit
+_MAGIC = ((b"\xff\xd8", "JPEG"), (b"\x89PNG", "PNG"), (b"GIF8", "GIF"), (b"BM", "BMP"), (b"RIFF", "WebP"),
+          (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"))
+_JPEG_MARKER = re.compile(rb"\xff[^\x00\xd0-\xd7\xff]")
+
+
+def image_size(path) -> tuple[int, int, str]:
+    """(width, height, format) from the file's header, without decoding pixels; UserError if not an image."""
+    from PIL import Image
+
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"photo not found: {path}")
+    if path.stat().st_size > MAX_BYTES:
+        raise UserError(f"{path.name} is too large ({path.stat().st_size / 1e6:.0f} MB; limit {MAX_BYTES / 1e6:.0f} MB)")
+    if path.stat().st_size == 0:
+        raise UserError(f"{path.name} is empty (0 bytes), not an image")
+    old = Image.MAX_IMAGE_PIXELS
+    try:
+        Image.MAX_IMAGE_PIXELS = None  # we apply our own limit below, with our own message
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(path) as im:
+                w, h, fmt = im.size[0], im.size[1], im.format or "?"
+    except Image.UnidentifiedImageError:
+        head = path.open("rb").read(8)
+        for magic, kind in _MAGIC:
+            if head.startswith(magic):
+                raise UserError(f"{path.name} is a corrupt {kind} file (unreadable header)") from None
+        raise UserError(f"{path.name} is not an image file (unrecognised content)") from None
+    except (OSError, SyntaxError, ValueError) as e:
+        raise UserError(f"{path.name} is a corrupt image file ({str(e).splitlines()[0][:80]})") from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+    if w * h > MAX_PIXELS:
+        raise UserError(f"{path.name} claims {w}x{h} pixels ({w * h / 1e6:.0f} MP), over the {MAX_PIXELS / 1e6:.0f} MP "
+                        f"limit: refused as a possible decompression bomb")
+    return w, h, fmt
+
+
+def _jpeg_complete(data: bytes) -> bool:
+    """Walk the JPEG's segments and entropy-coded scans; True when an EOI marker ends the image."""
+    if data[:2] != b"\xff\xd8":
+        return False
+    pos = 2
+    while pos + 2 <= len(data):
+        if data[pos] != 0xFF:
+            return False
+        marker = data[pos + 1]
+        if marker == 0xD9:
+            return True
+        if marker == 0xFF:  # fill byte
+            pos += 1
+            continue
+        if pos + 4 > len(data):
+            return False
+        seglen = int.from_bytes(data[pos + 2:pos + 4], "big")
+        pos += 2 + seglen
+        if marker == 0xDA:  # start of scan: skip entropy-coded data to the next real marker
+            m = _JPEG_MARKER.search(data, pos)
+            if m is None:
+                return False
+            pos = m.start()
+    return False
+
+
+def read_image_bgr(path) -> np.ndarray:
+    """Decode a photo to (H, W, 3) uint8 **BGR** (OpenCV order), EXIF orientation applied."""
+    path = Path(path)
+    w, h, fmt = image_size(path)
+    data = path.read_bytes()
+    if fmt == "JPEG" and not _jpeg_complete(data):
+        raise UserError(f"{path.name} is a corrupt or truncated JPEG file")
+    if fmt == "PNG" and b"IEND" not in data[-64:]:
+        raise UserError(f"{path.name} is a corrupt or truncated PNG file")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if img is None or img.size == 0:
+        raise UserError(f"{path.name} is a corrupt image file (cannot decode its {fmt} data)")
+    return img
+
+
+def write_atomic(path, data: bytes) -> None:
+    """Write bytes to `path` via a temporary file in the same folder and a rename (no partial file)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_image(path, rgb: np.ndarray, jpeg_quality: int = 95) -> None:
+    """Atomically write (H, W, 3) uint8 **RGB** as PNG or JPEG (by the file's extension)."""
+    path = Path(path)
+    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"expected (H, W, 3) uint8 RGB, got {rgb.shape} {rgb.dtype}")
+    ext = path.suffix.lower()
+    if ext not in (".png", ".jpg", ".jpeg"):
+        raise UserError(f"cannot write {path.name}: use a .png or .jpg file name")
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)] if ext != ".png" else []
+    ok, buf = cv2.imencode(".png" if ext == ".png" else ".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), params)
+    if not ok:
+        raise OSError(f"cannot encode {path}")
+    write_atomic(path, buf.tobytes())

@@ -1,0 +1,101 @@
+"""The sheet's QR code: payload text <-> metadata, and drawing/reading it with OpenCV 5.
+
+Payload (`formats` QR_*): "S3D<version>|<codec id>[|b=x0,y0,z0,x1,y1,z1][|o=radius,elevation,fov]"."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+
+__all__ = ["SheetMeta", "encode_payload", "decode_payload", "qr_matrix", "read_qr", "check_codec"]
+
+
+@dataclass(frozen=True)
+class SheetMeta:
+    """What decoding needs to know about a sheet."""
+
+    version: int = formats.SHEET_FORMAT_VERSION
+    """sheet format version"""
+    codec: str = formats.CODEC_ID
+    """id of the codec that made the snapshot ("none" until the codec exists)"""
+    box: tuple | None = None
+    """scene box (x0, y0, z0, x1, y1, z1) in world units, or None"""
+    orbit: tuple | None = None
+    """default orbit (radius, elevation_deg, fov_deg), or None"""
+
+    def as_dict(self) -> dict:
+        return {"version": self.version, "codec": self.codec,
+                "box": list(self.box) if self.box else None, "orbit": list(self.orbit) if self.orbit else None}
+
+
+def _nums(values) -> str:
+    return ",".join(f"{float(v):.4g}" for v in values)
+
+
+def encode_payload(meta: SheetMeta) -> str:
+    parts = [f"{formats.QR_MAGIC}{meta.version}", meta.codec]
+    if meta.box is not None:
+        parts.append("b=" + _nums(meta.box))
+    if meta.orbit is not None:
+        parts.append("o=" + _nums(meta.orbit))
+    text = formats.QR_SEP.join(parts)
+    if any(formats.QR_SEP in p for p in parts[1:2]):
+        raise ValueError(f"codec id must not contain {formats.QR_SEP!r}")
+    return text
+
+
+def decode_payload(text: str) -> SheetMeta:
+    """Parse a payload; raises ValueError when it is not a snapshot3d sheet's."""
+    parts = text.split(formats.QR_SEP)
+    if len(parts) < 2 or not parts[0].startswith(formats.QR_MAGIC) or not parts[0][len(formats.QR_MAGIC):].isdigit():
+        raise ValueError(f"not a snapshot3d QR payload: {text[:40]!r}")
+    fields = {}
+    for p in parts[2:]:
+        key, _, val = p.partition("=")
+        fields[key] = tuple(float(v) for v in val.split(","))
+    box, orbit = fields.get("b"), fields.get("o")
+    if (box is not None and len(box) != 6) or (orbit is not None and len(orbit) != 3):
+        raise ValueError(f"malformed box or orbit in QR payload: {text[:60]!r}")
+    return SheetMeta(int(parts[0][len(formats.QR_MAGIC):]), parts[1], box, orbit)
+
+
+def qr_matrix(text: str) -> np.ndarray:
+    """(N, N) uint8 QR modules for `text` (255 white, 0 black), quiet zone removed; error correction M."""
+    params = cv2.QRCodeEncoder.Params()
+    params.correction_level = cv2.QRCodeEncoder_CORRECT_LEVEL_M
+    q = cv2.QRCodeEncoder.create(params).encode(text)
+    dark = np.argwhere(q == 0)
+    (r0, c0), (r1, c1) = dark.min(0), dark.max(0)
+    return np.ascontiguousarray(q[r0:r1 + 1, c0:c1 + 1])
+
+
+def read_qr(gray: np.ndarray) -> str | None:
+    """Decode a QR code from (H, W) uint8 grey (a fronto-parallel crop with a quiet zone); None if unreadable."""
+    det = cv2.QRCodeDetector()
+
+    def variants():  # cheapest first; the later ones only run when the earlier fail
+        yield gray
+        yield cv2.GaussianBlur(gray, (0, 0), 1.0)
+        soft = cv2.GaussianBlur(gray, (0, 0), 2.0)
+        yield cv2.addWeighted(gray, 2.5, soft, -1.5, 0)  # unsharp mask against blur
+        yield cv2.adaptiveThreshold(gray, 255, cv2.ADAPTIVE_THRESH_GAUSSIAN_C, cv2.THRESH_BINARY, 31, 0)
+
+    for img in variants():
+        text, _, _ = det.detectAndDecode(img)
+        if text:
+            return text
+    return None
+
+
+def check_codec(meta: SheetMeta) -> None:
+    """UserError when the sheet was made for another format or codec than this build reads."""
+    if meta.version != formats.SHEET_FORMAT_VERSION:
+        raise UserError(f"sheet format version {meta.version} is not supported (this build reads "
+                        f"version {formats.SHEET_FORMAT_VERSION})")
+    if meta.codec != formats.CODEC_ID:
+        raise UserError(f"wrong codec id in the QR code: the sheet was made for codec {meta.codec!r}, "
+                        f"this build decodes {formats.CODEC_ID!r}")

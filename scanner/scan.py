@@ -1,0 +1,228 @@
+"""The scanner (DESIGN 1.4): find the sheet in a phone photo, fit its geometry, rectify the snapshot with
+anti-aliasing, correct its colour from the patches and read the QR code. numpy and OpenCV only.
+
+Markers are detected on a copy shrunk to about DETECT_SIDE pixels (area averaging), their corners
+refined at full resolution, and the photo is searched again at full resolution only when that fails.
+Every failure is a one-line `UserError` naming its cause."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+
+from . import layout
+from .colour import apply_colour, fit_colour, linear_lut, marker_contrast
+from .detect import detect_markers, make_detector, refine_corners
+from .diagnose import SHARPNESS_MIN, exposure_problem, sharpness
+from .fit import Fit, fit_geometry
+from .imageio_safe import read_image_bgr
+from .qr import check_codec, decode_payload, read_qr
+from .rectify import OVERSAMPLE, photo_px_per_unit, rectify_sheet
+
+__all__ = ["ScanResult", "scan_image", "scan_file", "DETECT_SIDE", "MIN_SNAPSHOT_PX", "REPORT_KEYS"]
+
+DETECT_SIDE = 1400        # longest side of the detection copy (pixels)
+MIN_SNAPSHOT_PX = 380     # at least one photo pixel per snapshot pixel: below, the snapshot is aliased
+MIN_CONTRAST = 0.3        # (paper - marker ink) / paper below this: washed out
+QR_MODULES = (21, 25, 29, 33)  # QR versions 1-4: the sheet's payloads fit these
+REPORT_KEYS = ("detected", "corners", "reprojection_px", "confidence", "qr", "timings_ms")
+
+
+@dataclass
+class ScanResult:
+    """snapshot: (380, 380, 3) uint8 RGB, colour-corrected. corners: (4, 2) photo pixels, clockwise from
+    the snapshot's top-left. fit: the geometry (homography, lens)."""
+
+    snapshot: np.ndarray
+    corners: np.ndarray
+    reprojection_px: float
+    confidence: float
+    qr: dict | None
+    timings_ms: dict
+    markers: list = field(default_factory=list)
+    fit: Fit | None = None
+
+    def report(self) -> dict:
+        return {"detected": True, "corners": np.round(self.corners, 3).tolist(),
+                "reprojection_px": round(float(self.reprojection_px), 4), "confidence": round(float(self.confidence), 3),
+                "qr": self.qr, "timings_ms": {k: round(v, 2) for k, v in self.timings_ms.items()}}
+
+
+@lru_cache(maxsize=1)
+def _detector():
+    return make_detector(formats.ARUCO_DICT)
+
+
+def _sheet_markers(ids: np.ndarray, corners: np.ndarray) -> dict[int, np.ndarray]:
+    wanted = formats.SHEET_MARKER_IDS[formats.SHEET_FORMAT_VERSION]
+    found = {}
+    for i, c in zip(ids.tolist(), corners):
+        if i in wanted and (i not in found or cv2.contourArea(c) > cv2.contourArea(found[i])):
+            found[i] = c
+    return found
+
+
+def _find(img: np.ndarray, factor: int) -> tuple[dict, np.ndarray]:
+    """Sheet markers found on the photo shrunk by `factor`, corners in full-resolution pixels; and the grey copy."""
+    h, w = img.shape[:2]
+    small = cv2.resize(img, (w // factor, h // factor), interpolation=cv2.INTER_AREA) if factor > 1 else img
+    gray = cv2.cvtColor(small, cv2.COLOR_BGR2GRAY)
+    ids, corners = detect_markers(gray, detector=_detector())
+    corners = (corners + 0.5) * np.array([w / (w // factor), h / (h // factor)], np.float32) - 0.5
+    return _sheet_markers(ids, corners), gray
+
+
+def _why_not_found(found: dict, gray: np.ndarray) -> str:
+    if found:
+        return (f"the sheet is cut off or partly hidden: only {len(found)} of its 4 corner markers are visible "
+                f"(ids {sorted(found)}); fit the whole sheet in the photo")
+    cause = exposure_problem(gray)
+    if cause:
+        return cause + "; no sheet markers visible"
+    s = sharpness(gray)
+    if s < SHARPNESS_MIN:
+        return f"the photo is too blurred to find the sheet (sharpness {s:.3f} < {SHARPNESS_MIN}); hold still and focus"
+    return "no snapshot3d sheet found in the photo (none of its ArUco markers is visible)"
+
+
+def scan_image(img: np.ndarray) -> ScanResult:
+    """Scan an (H, W, 3) uint8 **BGR** photo. Raises UserError with the cause when it cannot."""
+    if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"expected (H, W, 3) uint8 BGR, got {img.shape} {img.dtype}")
+    t = {}
+    t0 = time.perf_counter()
+    h, w = img.shape[:2]
+    factor = max(1, round(max(h, w) / DETECT_SIDE))
+    found, gray = _find(img, factor)
+    if len(found) < 3 and factor > 1:  # small or hard to see: look again at full resolution
+        found2, _ = _find(img, 1)
+        found = found2 if len(found2) >= len(found) else found
+    if len(found) < 3:
+        raise UserError(_why_not_found(found, gray))
+    t["detect"] = (time.perf_counter() - t0) * 1e3
+    t1 = time.perf_counter()
+    mids = sorted(found)
+    photo = refine_corners(img, np.stack([found[i] for i in mids]))
+    t["refine"] = (time.perf_counter() - t1) * 1e3
+    t1 = time.perf_counter()
+    ref = layout.marker_corners()
+    marker_px = float(np.mean([np.linalg.norm(photo[k, j] - photo[k, (j + 1) % 4]) for k in range(len(mids))
+                               for j in range(4)]))
+    side = marker_px * formats.SNAPSHOT_SIZE / formats.MARKER_SIZE
+    if side < MIN_SNAPSHOT_PX:
+        raise UserError(f"the sheet is too small in the photo: the snapshot is about {side:.0f} px across, at least "
+                        f"{MIN_SNAPSHOT_PX} needed (move closer)")
+    max_rms = max(2.0, 0.03 * marker_px)
+    fit = fit_geometry(np.concatenate([ref[i] for i in mids]), photo.reshape(-1, 2), (w, h),
+                       outlier_px=max(3.0, 0.15 * marker_px))
+    if (fit is None or fit.rms_px > max(0.75, 0.005 * marker_px)) and len(mids) == 4:
+        # one marker misplaced as a whole (glare, a fold)? keep the best three when they agree far better
+        trials = []
+        for drop in range(4):
+            keep = [k for k in range(4) if k != drop]
+            f = fit_geometry(np.concatenate([ref[mids[k]] for k in keep]), photo[keep].reshape(-1, 2), (w, h),
+                             outlier_px=max(3.0, 0.15 * marker_px))
+            if f is not None:
+                trials.append((f.rms_px, f, keep))
+        if trials and min(trials, key=lambda x: x[0])[0] < min(max_rms, 0.5 * (fit.rms_px if fit else np.inf)):
+            _, fit, keep = min(trials, key=lambda x: x[0])
+            mids, photo = [mids[k] for k in keep], photo[keep]
+    if fit is None or fit.rms_px > max_rms:
+        f = gray.shape[1] / w  # sharpness where the markers are (the background may be sharper or softer)
+        x0, y0 = np.maximum((photo.reshape(-1, 2).min(0) * f).astype(int), 0)
+        x1, y1 = (photo.reshape(-1, 2).max(0) * f).astype(int) + 1
+        s = sharpness(gray[y0:y1, x0:x1]) if (x1 - x0) * (y1 - y0) > 400 else sharpness(gray)
+        if s < 3 * SHARPNESS_MIN:  # a sharp sheet is ~0.4 here; markers that disagree and are soft: blur
+            raise UserError(f"the photo is too blurred to locate the sheet's corners (sharpness {s:.3f}); "
+                            f"hold still and focus")
+        raise UserError("the sheet's markers do not lie on one flat sheet (is the print folded or curled?)")
+    corners = fit.to_photo(layout.snapshot_corners())
+    if corners.min() < -0.5 or np.any(corners.max(0) > (w - 0.5, h - 0.5)):
+        raise UserError("the sheet is cut off: part of the snapshot lies outside the photo")
+    side = photo_px_per_unit(fit) * formats.SNAPSHOT_SIZE
+    if side < MIN_SNAPSHOT_PX:
+        raise UserError(f"the sheet is too small in the photo: the snapshot is {side:.0f} px across, at least "
+                        f"{MIN_SNAPSHOT_PX} needed (move closer)")
+    t["fit"] = (time.perf_counter() - t1) * 1e3
+    t1 = time.perf_counter()
+    hi = rectify_sheet(img, fit)
+    lo = cv2.cvtColor(_halve(cv2.LUT(hi, _lut())), cv2.COLOR_BGR2RGB)  # one pixel per layout unit, linear RGB
+    t["rectify"] = (time.perf_counter() - t1) * 1e3
+    t1 = time.perf_counter()
+    contrast = marker_contrast(lo)
+    if contrast < MIN_CONTRAST:
+        raise UserError(f"the photo is washed out: the markers' black is only {100 * contrast:.0f}% darker than "
+                        f"the paper (glare or overexposure)")
+    model = fit_colour(lo)
+    n = formats.SNAPSHOT_SIZE
+    sx0, sy0 = formats.SHEET_BOX[:2]
+    snapshot = apply_colour(model, lo[-sy0:-sy0 + n, -sx0:-sx0 + n], (0, 0, n, n))
+    t["colour"] = (time.perf_counter() - t1) * 1e3
+    t1 = time.perf_counter()
+    qr = _read_qr(hi, model)
+    t["qr"] = (time.perf_counter() - t1) * 1e3
+    t["total"] = (time.perf_counter() - t0) * 1e3
+    rms_snap = fit.rms_px / photo_px_per_unit(fit)
+    conf = len(mids) / 4 * float(np.exp(-max(0.0, rms_snap - 0.3))) * (1.0 if qr else 0.8)
+    return ScanResult(snapshot, corners, fit.rms_px, conf, qr, t, mids, fit)
+
+
+@lru_cache(maxsize=1)
+def _lut() -> np.ndarray:
+    return linear_lut()
+
+
+def _halve(x: np.ndarray) -> np.ndarray:
+    """2x2 area average of float32 (2h, 2w, 3) -> (h, w, 3)."""
+    assert OVERSAMPLE == 2
+    return (x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2]) * 0.25
+
+
+def _read_qr(hi: np.ndarray, model: dict) -> dict | None:
+    """Read the QR from the rectified sheet (OVERSAMPLE px per unit); UserError on a wrong codec id."""
+    sx0, sy0 = formats.SHEET_BOX[:2]
+    qx0, qy0, qx1, qy1 = formats.QR_BOX
+    o, pad = OVERSAMPLE, 4
+    crop = hi[(qy0 - pad - sy0) * o:(qy1 + pad - sy0) * o, (qx0 - pad - sx0) * o:(qx1 + pad - sx0) * o]
+    gray = cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    lo, hi_ = np.percentile(gray, (2, 98))
+    gray = np.clip((gray - lo) / max(hi_ - lo, 1.0) * 255.0, 0, 255).astype(np.uint8)
+    gray = cv2.copyMakeBorder(gray, 24, 24, 24, 24, cv2.BORDER_CONSTANT, value=255)
+    text = read_qr(gray) or read_qr(cv2.resize(gray, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC))
+    if text is None:  # the code's square is known exactly: sample its module grid and redraw it cleanly
+        side = (qx1 - qx0) * o
+        for n in QR_MODULES:
+            c = 24 + pad * o + (np.arange(n) + 0.5) * side / n - 0.5  # module centres in the bordered crop
+            mx, my = np.meshgrid(c.astype(np.float32), c.astype(np.float32))
+            v = cv2.remap(gray, mx, my, cv2.INTER_LINEAR)
+            lo_, hi2 = np.percentile(v, (10, 90))
+            modules = np.where(v > (lo_ + hi2) / 2, 255, 0).astype(np.uint8)
+            clean = cv2.copyMakeBorder(cv2.resize(modules, (n * 8, n * 8), interpolation=cv2.INTER_NEAREST),
+                                       32, 32, 32, 32, cv2.BORDER_CONSTANT, value=255)
+            text = read_qr(clean)
+            if text:
+                break
+    if text is None:
+        return None
+    try:
+        meta = decode_payload(text)
+    except ValueError:
+        raise UserError("the QR code on the sheet is not a snapshot3d code") from None
+    check_codec(meta)
+    return meta.as_dict()
+
+
+def scan_file(path) -> ScanResult:
+    """Read (safely, `imageio_safe`) and scan a photo file; timings include decoding ("decode")."""
+    t0 = time.perf_counter()
+    img = read_image_bgr(path)
+    dec = (time.perf_counter() - t0) * 1e3
+    res = scan_image(img)
+    res.timings_ms = {"decode": dec, **res.timings_ms, "total_with_decode": dec + res.timings_ms["total"]}
+    return res

@@ -1,0 +1,113 @@
+"""The printable sheet (DESIGN 1.3): snapshot, corner ArUco markers, colour patches, QR code, quiet zone.
+
+The sheet image is the layout (`scanner.layout`, `formats` "sheet and scan") drawn at an integer
+number of dots per snapshot pixel, so that every snapshot pixel prints as a crisp k x k block and a
+perfect capture gives the snapshot back exactly."""
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+
+from . import layout
+from .imageio_safe import read_image_bgr, write_atomic
+from .qr import SheetMeta, encode_payload, qr_matrix
+
+__all__ = ["SheetConfig", "render_sheet", "sheet_command", "meta_from_scene"]
+
+
+@dataclass(frozen=True)
+class SheetConfig:
+    """How large to print the sheet."""
+
+    width_mm: float = field(default=100.0, metadata={"help": "printed width of the whole sheet in millimetres"})
+    dpi: float = field(default=300.0, metadata={"help": "printer resolution; the sheet is drawn at the nearest whole "
+                                                        "number of dots per snapshot pixel"})
+
+    def dots_per_pixel(self) -> int:
+        """Dots per snapshot pixel k: the integer nearest to width_mm * dpi / 25.4 / sheet width (>= 1)."""
+        return max(1, round(self.width_mm / 25.4 * self.dpi / layout.sheet_size()[0]))
+
+
+def render_sheet(snapshot: np.ndarray, meta: SheetMeta, k: int) -> np.ndarray:
+    """Draw the sheet at k dots per snapshot pixel.
+
+    snapshot: (SNAPSHOT_SIZE, SNAPSHOT_SIZE, 3) uint8 RGB. Returns (H, W, 3) uint8 RGB,
+    H, W = k * layout.sheet_size()[::-1]."""
+    n = formats.SNAPSHOT_SIZE
+    if snapshot.shape != (n, n, 3) or snapshot.dtype != np.uint8:
+        raise ValueError(f"snapshot must be ({n}, {n}, 3) uint8 RGB, got {snapshot.shape} {snapshot.dtype}")
+    w, h = layout.sheet_size()
+    x0, y0 = formats.SHEET_BOX[:2]
+    sheet = np.full((h * k, w * k, 3), 255, np.uint8)
+
+    def put(img, x, y):  # layout (x, y) of the top-left corner
+        r, c = (y - y0) * k, (x - x0) * k
+        sheet[r:r + img.shape[0], c:c + img.shape[1]] = img if img.ndim == 3 else img[..., None]
+
+    put(np.repeat(np.repeat(snapshot, k, 0), k, 1), 0, 0)
+    dictionary = layout.aruco_dictionary()
+    for mid, corners in layout.marker_corners(meta.version).items():
+        marker = cv2.aruco.generateImageMarker(dictionary, mid, formats.MARKER_SIZE * k, borderBits=1)
+        put(marker, int(corners[0, 0]), int(corners[0, 1]))
+    for colour, (bx0, by0, bx1, by1) in zip(formats.PATCH_COLOURS, layout.patch_boxes()):
+        r0, r1 = round((by0 - y0) * k), round((by1 - y0) * k)
+        c0, c1 = round((bx0 - x0) * k), round((bx1 - x0) * k)
+        sheet[r0:r1, c0:c1] = np.round(np.array(colour) * 255).astype(np.uint8)
+    qx0, qy0, qx1, _ = formats.QR_BOX
+    modules = qr_matrix(encode_payload(meta))
+    side = (qx1 - qx0) * k
+    qr = cv2.resize(modules, (side, side), interpolation=cv2.INTER_NEAREST)
+    put(qr, qx0, qy0)
+    return sheet
+
+
+def meta_from_scene(path) -> SheetMeta:
+    """Sheet metadata with the box and orbit of a scene file (.s3d)."""
+    from snapshot3d.scene import load_scene_file
+
+    scene = load_scene_file(path)
+    o = scene.orbit
+    return SheetMeta(box=tuple(float(v) for v in np.asarray(scene.box).ravel()),
+                     orbit=(float(o.radius), float(o.elevation_deg), float(o.fov_deg)))
+
+
+def _write_print_file(path: Path, rgb: np.ndarray, width_mm: float) -> None:
+    """PDF with the page exactly width_mm wide, or PNG carrying the matching dpi (so it prints at size)."""
+    from PIL import Image
+
+    dpi = rgb.shape[1] / (width_mm / 25.4)
+    buf = io.BytesIO()
+    if path.suffix.lower() == ".pdf":
+        Image.fromarray(rgb).save(buf, format="PDF", resolution=dpi)
+    else:
+        Image.fromarray(rgb).save(buf, format="PNG", dpi=(dpi, dpi))
+    write_atomic(path, buf.getvalue())
+
+
+def sheet_command(args) -> int:
+    """`snapshot3d sheet SNAPSHOT -o OUT [--width-mm --dpi --scene]`."""
+    cfg = SheetConfig(width_mm=args.width_mm, dpi=args.dpi)
+    if not (10 <= cfg.width_mm <= 2000) or not (50 <= cfg.dpi <= 4800):
+        raise UserError("--width-mm must be in [10, 2000] and --dpi in [50, 4800]")
+    out = Path(args.output)
+    if out.suffix.lower() not in (".png", ".pdf"):
+        raise UserError(f"cannot write {out.name}: the sheet is written as .png or .pdf")
+    snap = cv2.cvtColor(read_image_bgr(args.snapshot), cv2.COLOR_BGR2RGB)
+    n = formats.SNAPSHOT_SIZE
+    if snap.shape[:2] != (n, n):
+        raise UserError(f"{Path(args.snapshot).name} is {snap.shape[1]}x{snap.shape[0]}; a snapshot is {n}x{n}")
+    meta = meta_from_scene(args.scene) if args.scene else SheetMeta()
+    k = cfg.dots_per_pixel()
+    sheet = render_sheet(snap, meta, k)
+    _write_print_file(out, sheet, cfg.width_mm)
+    dpi = sheet.shape[1] / (cfg.width_mm / 25.4)
+    print(f"wrote {out} ({sheet.shape[1]}x{sheet.shape[0]} px, {k} dots per snapshot pixel, "
+          f"{cfg.width_mm:g} mm wide at {dpi:.0f} dpi; snapshot {cfg.width_mm * n / layout.sheet_size()[0]:.1f} mm)")
+    return 0
