@@ -29,6 +29,11 @@ def load_scene(spec: str, downscale: int = 1, **builtin_kw) -> PosedImages:
     path = Path(spec)
     if not path.exists():
         raise UserError(f"scene not found: {spec} (give a folder, a transforms.json, or builtin:NAME)")
+    if path.suffix == ".s3d":
+        from .scene import load_scene_file
+        load_scene_file(path)  # a scene for another decoder or a corrupt file is refused with its own reason
+        raise UserError(f"{spec} is an already fitted scene; fit takes posed images (a folder, transforms.json "
+                        "or builtin:NAME)")
     if path.is_dir() and (path / "transforms_train.json").is_file():
         return load_blender(path, downscale)
     if path.is_file() and path.suffix == ".json":

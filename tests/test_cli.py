@@ -48,6 +48,9 @@ def test_render_scene_from_other_decoder(tmp_path):
     assert not (tmp_path / "views").exists()
     proc = run("mesh", str(tmp_path / "old.s3d"), "-o", str(tmp_path / "m.glb"))
     _assert_one_line_error(proc, "fitted for decoder")
+    proc = run("fit", str(tmp_path / "old.s3d"), "-o", str(tmp_path / "new.s3d"))
+    _assert_one_line_error(proc, "fitted for decoder 'tri-dec-0'")
+    assert not (tmp_path / "new.s3d").exists()
 
 
 def test_render_corrupt_scene(tmp_path):

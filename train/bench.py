@@ -77,7 +77,7 @@ def bench_scene(name: str, quick: bool, save) -> None:
         save({"scene": name, "sweep": "throughput", **_run_fit(posed, dec, cfg, hull if occ else None)})
 
 
-def _chart(rows, path: Path, cores: int):
+def _chart(rows, path: Path, cores: int, threads: int):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -104,7 +104,7 @@ def _chart(rows, path: Path, cores: int):
     axes[2].set(ylabel="thousand rays / s (train)", title="training rays/s: occupancy grid, early termination")
     for a in axes:
         a.grid(alpha=0.3), a.legend()
-    fig.suptitle(f"snapshot3d bench fit — {cores} CPU cores, torch threads {torch.get_num_threads()}")
+    fig.suptitle(f"snapshot3d bench fit — {cores} CPU cores, torch threads {threads}")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -121,7 +121,7 @@ def merge_results(out: Path) -> list[dict]:
         w.writeheader(), w.writerows(rows)
     meta = {**parts[0], "rows": rows, "command": [p["command"] for p in parts]}
     (out / "fit.json").write_text(json.dumps(meta, indent=2))
-    _chart(rows, out / "fit.png", parts[0]["cpu_count"])
+    _chart(rows, out / "fit.png", parts[0]["cpu_count"], parts[0]["torch_threads"])
     return rows
 
 
@@ -147,7 +147,7 @@ def bench_fit_command(args) -> int:
                 "configs": {k: asdict(v[2]) for k, v in BENCH_SCENES.items()},
                 "step_sweeps": {k: v[3] for k, v in BENCH_SCENES.items()}, "rows": rows}
         (out / f"fit{suffix}.json").write_text(json.dumps(meta, indent=2))
-        _chart(rows, out / f"fit{suffix}.png", cores)
+        _chart(rows, out / f"fit{suffix}.png", cores, torch.get_num_threads())
 
     for name in args.scenes.split(","):
         if name not in BENCH_SCENES:
