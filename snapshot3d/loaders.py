@@ -22,6 +22,8 @@ DEFAULT_BOX = np.array([[-1.5, -1.5, -1.5], [1.5, 1.5, 1.5]], np.float32)  # NeR
 def load_scene(spec: str, downscale: int = 1, **builtin_kw) -> PosedImages:
     """`builtin:NAME`, a Blender folder (with `transforms_train.json`), or a nerfstudio folder or
     `transforms.json` file."""
+    if downscale < 1:
+        raise UserError(f"--downscale must be >= 1, not {downscale}")
     if spec.startswith("builtin:"):
         from .builtin import builtin_scene  # lazy: renders meshes
         size = builtin_kw.pop("size", 200)

@@ -39,6 +39,16 @@ def test_fit_unknown_builtin(tmp_path):
     _assert_one_line_error(run("fit", "builtin:nothing", "-o", str(tmp_path / "x.s3d")), "builtin")
 
 
+@pytest.mark.parametrize("args,match", [
+    (["--plane-channels", "20"], "--plane-channels must be in 1..12"),
+    (["--steps", "0"], "--steps, --batch-rays"),
+    (["--downscale", "0"], "--downscale must be >= 1"),
+])
+def test_fit_bad_settings(tmp_path, args, match):
+    _assert_one_line_error(run("fit", "builtin:procedural", "-o", str(tmp_path / "x.s3d"), *args), match)
+    assert not (tmp_path / "x.s3d").exists()
+
+
 def test_render_scene_from_other_decoder(tmp_path):
     s = Scene(codes=np.zeros((3, 4, 8, 8), np.uint8), box=np.array([[-1, -1, -1], [1, 1, 1]]),
               orbit=Orbit(radius=3.0), decoder_version="tri-dec-0")

@@ -16,7 +16,7 @@ import torch
 
 from snapshot3d.builtin import shared_data_dir
 from snapshot3d.errors import UserError
-from snapshot3d.scene import dequantize_planes
+from snapshot3d.scene import Orbit, Scene, dequantize_planes
 
 from .config import LADDER, FitConfig
 from .decoder import load_decoder
@@ -49,7 +49,7 @@ def _run_fit(posed, dec, cfg, hull):
     res = fit(posed, dec, cfg, hull=hull)
     train_s = time.perf_counter() - t0
     ev = evaluate_planes(dequantize_planes(res.codes), dec, posed)
-    kb = (res.codes.size + 36) / 1000
+    kb = Scene(codes=res.codes, box=posed.box, orbit=Orbit(radius=1.0)).scene_kb
     return {"plane_res": cfg.plane_res, "plane_channels": cfg.plane_channels, "steps": cfg.steps,
             "scene_kb": round(kb, 2), "field_psnr": round(ev["field_psnr"], 3), "field_ssim": round(ev["field_ssim"], 4),
             "fit_seconds": round(time.perf_counter() - t0, 1), "train_seconds": round(train_s, 1),

@@ -17,7 +17,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.images import contact_sheet, write_gif, write_png, write_views
 from snapshot3d.scene import Orbit, Scene, load_scene_file, save_scene
 
-from .config import FitConfig
+from .config import FitConfig, check_fit_config
 from .decoder import load_decoder
 
 __all__ = ["fit_scene", "fit_command", "render_command", "mesh_command", "train_decoder_command", "orbit_cameras",
@@ -70,7 +70,6 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     from .evaluate import evaluate_planes
     from .fit import fit
 
-    torch.set_num_threads(max(1, torch.get_num_threads()))
     posed = load_scene(spec, downscale=downscale, size=size) if spec.startswith("builtin:") else \
         load_scene(spec, downscale=downscale)
     if posed.skipped and not quiet:
@@ -106,7 +105,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
 
 
 def fit_command(args) -> int:
-    cfg = FitConfig(**{k: getattr(args, k) for k in FitConfig.__dataclass_fields__})
+    cfg = check_fit_config(FitConfig(**{k: getattr(args, k) for k in FitConfig.__dataclass_fields__}))
     out = Path(args.output)
     if out.suffix != ".s3d":
         raise UserError(f"{out}: the scene file must end in .s3d")
@@ -156,6 +155,8 @@ def mesh_command(args) -> int:
     from .sampler import BoxFrame
 
     scene = load_scene_file(args.scene)
+    if args.res < 8:
+        raise UserError("--res must be >= 8")
     if not str(args.output).lower().endswith((".glb", ".ply")):
         raise UserError(f"{args.output}: mesh output must end in .glb or .ply")
     decoder = load_decoder(scene.decoder_version)

@@ -6,7 +6,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["FitConfig", "DecoderConfig", "LADDER"]
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+
+__all__ = ["FitConfig", "DecoderConfig", "LADDER", "check_fit_config"]
 
 
 def _f(default, help: str):
@@ -47,6 +50,24 @@ class DecoderConfig:
     lr: float = _f(3e-3, "decoder Adam learning rate, decayed 10x over the run")
     size: int = _f(200, "rendered view size of the training scenes")
     seed: int = _f(0, "random seed")
+
+
+def check_fit_config(cfg: FitConfig) -> FitConfig:
+    """Refuse settings no fit can run with (one-line `UserError`); returns `cfg`."""
+    problems = []
+    if not 1 <= cfg.plane_channels <= formats.C_MAX:
+        problems.append(f"--plane-channels must be in 1..{formats.C_MAX}")
+    if cfg.plane_res < 2:
+        problems.append("--plane-res must be >= 2")
+    if cfg.steps < 1 or cfg.batch_rays < 1 or cfg.occ_every < 1 or cfg.checkpoint_every < 1:
+        problems.append("--steps, --batch-rays, --occ-every and --checkpoint-every must be >= 1")
+    if not (cfg.lr > 0 and cfg.lr_final > 0):
+        problems.append("--lr and --lr-final must be > 0")
+    if not (0 <= cfg.qat_fraction <= 1 and 0 <= cfg.fg_fraction <= 1 and 0 <= cfg.min_transmittance < 1):
+        problems.append("--qat-fraction and --fg-fraction must be in [0, 1], --min-transmittance in [0, 1)")
+    if problems:
+        raise UserError("; ".join(problems))
+    return cfg
 
 
 # `fit --budget auto`: (plane_res, plane_channels) from large to small; all within the paper's 160 kB.

@@ -19,7 +19,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.posed import PosedImages
 from snapshot3d.scene import quantize_planes
 
-from .config import FitConfig
+from .config import FitConfig, check_fit_config
 from .field import TriPlanes, decode, sample_planes, straight_through_8bit
 from .occupancy import OccupancyGrid
 from .rays import RayBank, make_rays
@@ -61,8 +61,7 @@ def hull_grid(posed: PosedImages, res: int = formats.OCC_RES) -> torch.Tensor | 
 
 def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | None = None,
               hull: torch.Tensor | None = None) -> FitState:
-    if not 1 <= cfg.plane_channels <= formats.C_MAX:
-        raise ValueError(f"plane_channels must be in 1..{formats.C_MAX}")
+    check_fit_config(cfg)
     frame = BoxFrame.from_box(posed.box)
     planes = TriPlanes(cfg.plane_res, cfg.plane_channels, seed=cfg.seed)
     if init_planes is not None:
