@@ -49,3 +49,8 @@ def add_bench_commands(bsub) -> None:
     b.add_argument("--timing-runs", type=int, default=30, help="repeated scans of one 12 MP photo for the "
                                                                "time median (default 30)")
     b.set_defaults(func=_run("snapshot3d.scanner.bench", "bench_scan_command"))
+    c = bsub.add_parser("channel", help="what scan leaves of a printed snapshot, as the codec channel's parameters")
+    c.add_argument("--out", default="bench/results", help="output folder (default: bench/results)")
+    c.add_argument("--seeds", type=int, default=8, help="simulated photos per severity (default 8)")
+    c.add_argument("--severities", default="jpeg75,mild,moderate,severe", help="comma-separated severities")
+    c.set_defaults(func=_run("snapshot3d.scanner.channel_fit", "bench_channel_command"))

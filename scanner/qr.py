@@ -1,6 +1,8 @@
 """The sheet's QR code: payload text <-> metadata, and drawing/reading it with OpenCV 5.
 
-Payload (`formats` QR_*): "S3D<version>|<codec id>[|b=x0,y0,z0,x1,y1,z1][|o=radius,elevation,fov]"."""
+Payload (`formats` QR_*): "S3D<version>|<codec id>[|b=x0,y0,z0,x1,y1,z1][|o=radius,elevation,fov]
+[|t=x,y,z][|p=R,C][|s=strength]" (orbit target, plane resolution and channels, embedding strength).
+The same text travels in a snapshot file's metadata (PNG text chunk or JPEG comment)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -21,15 +23,23 @@ class SheetMeta:
     version: int = formats.SHEET_FORMAT_VERSION
     """sheet format version"""
     codec: str = formats.CODEC_ID
-    """id of the codec that made the snapshot ("none" until the codec exists)"""
+    """id of the codec that made the snapshot"""
     box: tuple | None = None
     """scene box (x0, y0, z0, x1, y1, z1) in world units, or None"""
     orbit: tuple | None = None
     """default orbit (radius, elevation_deg, fov_deg), or None"""
+    target: tuple | None = None
+    """orbit target (x, y, z), or None (the box centre)"""
+    planes: tuple | None = None
+    """(R, C) of the hidden planes, or None"""
+    strength: float | None = None
+    """embedding strength the snapshot was made with, or None (1)"""
 
     def as_dict(self) -> dict:
         return {"version": self.version, "codec": self.codec,
-                "box": list(self.box) if self.box else None, "orbit": list(self.orbit) if self.orbit else None}
+                "box": list(self.box) if self.box else None, "orbit": list(self.orbit) if self.orbit else None,
+                "target": list(self.target) if self.target else None,
+                "planes": list(self.planes) if self.planes else None, "strength": self.strength}
 
 
 def _nums(values) -> str:
@@ -42,6 +52,12 @@ def encode_payload(meta: SheetMeta) -> str:
         parts.append("b=" + _nums(meta.box))
     if meta.orbit is not None:
         parts.append("o=" + _nums(meta.orbit))
+    if meta.target is not None:
+        parts.append("t=" + _nums(meta.target))
+    if meta.planes is not None:
+        parts.append("p=" + ",".join(str(int(v)) for v in meta.planes))
+    if meta.strength is not None:
+        parts.append("s=" + _nums([meta.strength]))
     text = formats.QR_SEP.join(parts)
     if any(formats.QR_SEP in p for p in parts[1:2]):
         raise ValueError(f"codec id must not contain {formats.QR_SEP!r}")
@@ -54,13 +70,19 @@ def decode_payload(text: str) -> SheetMeta:
     if len(parts) < 2 or not parts[0].startswith(formats.QR_MAGIC) or not parts[0][len(formats.QR_MAGIC):].isdigit():
         raise ValueError(f"not a snapshot3d QR payload: {text[:40]!r}")
     fields = {}
-    for p in parts[2:]:
-        key, _, val = p.partition("=")
-        fields[key] = tuple(float(v) for v in val.split(","))
-    box, orbit = fields.get("b"), fields.get("o")
-    if (box is not None and len(box) != 6) or (orbit is not None and len(orbit) != 3):
-        raise ValueError(f"malformed box or orbit in QR payload: {text[:60]!r}")
-    return SheetMeta(int(parts[0][len(formats.QR_MAGIC):]), parts[1], box, orbit)
+    try:
+        for p in parts[2:]:
+            key, _, val = p.partition("=")
+            fields[key] = tuple(float(v) for v in val.split(","))
+    except ValueError:
+        raise ValueError(f"malformed number in QR payload: {text[:60]!r}") from None
+    lengths = {"b": 6, "o": 3, "t": 3, "p": 2, "s": 1}
+    if any(k in fields and len(fields[k]) != n for k, n in lengths.items()):
+        raise ValueError(f"malformed field in QR payload: {text[:60]!r}")
+    planes = tuple(int(v) for v in fields["p"]) if "p" in fields else None
+    strength = fields["s"][0] if "s" in fields else None
+    return SheetMeta(int(parts[0][len(formats.QR_MAGIC):]), parts[1], fields.get("b"), fields.get("o"),
+                     fields.get("t"), planes, strength)
 
 
 def qr_matrix(text: str) -> np.ndarray:

@@ -75,7 +75,8 @@ def meta_from_scene(path) -> SheetMeta:
     scene = load_scene_file(path)
     o = scene.orbit
     return SheetMeta(box=tuple(float(v) for v in np.asarray(scene.box).ravel()),
-                     orbit=(float(o.radius), float(o.elevation_deg), float(o.fov_deg)))
+                     orbit=(float(o.radius), float(o.elevation_deg), float(o.fov_deg)),
+                     target=tuple(float(v) for v in o.target), planes=(scene.resolution, scene.channels))
 
 
 def _write_print_file(path: Path, rgb: np.ndarray, width_mm: float) -> None:
@@ -104,6 +105,13 @@ def sheet_command(args) -> int:
     if snap.shape[:2] != (n, n):
         raise UserError(f"{Path(args.snapshot).name} is {snap.shape[1]}x{snap.shape[0]}; a snapshot is {n}x{n}")
     meta = meta_from_scene(args.scene) if args.scene else SheetMeta()
+    if not args.scene:  # a snapshot from `embed` carries its own metadata
+        from .snapfile import read_snapshot
+
+        try:
+            meta = read_snapshot(args.snapshot)[1]
+        except UserError:
+            pass
     k = cfg.dots_per_pixel()
     sheet = render_sheet(snap, meta, k)
     _write_print_file(out, sheet, cfg.width_mm)

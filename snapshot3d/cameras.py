@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pixel_rays", "look_at", "orbit_poses", "focal_from_fov", "project"]
+__all__ = ["orbit_cameras", "pixel_rays", "look_at", "orbit_poses", "focal_from_fov", "project"]
 
 
 def focal_from_fov(fov_x_rad: float, width: int) -> float:
@@ -70,3 +70,13 @@ def orbit_poses(n: int, radius: float, elevation_deg, target=(0.0, 0.0, 0.0), az
     target = np.asarray(target, dtype=np.float64)
     eyes = target + radius * np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], -1)
     return np.stack([look_at(e, target, up) for e in eyes])
+
+
+def orbit_cameras(orbit, views: int, size: int):
+    """c2w (views, 4, 4) float32 OpenGL and intrinsics (views, 4) (fx, fy, cx, cy) of a scene's orbit
+    (`scene.Orbit`) rendered at size x size pixels."""
+    from . import formats
+
+    c2w = orbit_poses(views, orbit.radius, orbit.elevation_deg, orbit.target, up=formats.WORLD_UP).astype(np.float32)
+    f = focal_from_fov(np.deg2rad(orbit.fov_deg), size)
+    return c2w, np.tile(np.array([f, f, size / 2, size / 2], np.float32), (views, 1))

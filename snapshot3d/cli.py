@@ -26,7 +26,7 @@ def _add_dataclass_options(parser: argparse.ArgumentParser, cls) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from snapshot3d.train.config import FitConfig  # torch-free dataclasses
+    from snapshot3d.train.config import CodecConfig, FitConfig  # torch-free dataclasses
 
     p = argparse.ArgumentParser(prog="snapshot3d", description="3D snapshots: a 3D scene printed as a photograph.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -63,6 +63,27 @@ def build_parser() -> argparse.ArgumentParser:
     td.add_argument("--seed", type=int, default=0)
     td.add_argument("-o", "--output", help="weights file (default: the package's assets)")
     td.set_defaults(func=_run("snapshot3d.train.commands", "train_decoder_command"))
+    tc = tsub.add_parser("codec", help="train the hiding codec through the print-and-capture channel (resumable)")
+    tc.add_argument("--scenes-dir", default="cache/scenes", help="folder of fitted training scenes (.s3d)")
+    tc.add_argument("-o", "--output", help="weights file (default: the package's assets)")
+    _add_dataclass_options(tc, CodecConfig)
+    tc.set_defaults(func=_run("snapshot3d.train.codec_commands", "train_codec_command"))
+
+    e = sub.add_parser("embed", help="hide a scene in a host photo: a 380x380 snapshot")
+    e.add_argument("scene", help="scene file (.s3d)")
+    e.add_argument("--host", default="builtin:coffee", help="host photo file, or builtin:NAME (a bundled photo)")
+    e.add_argument("-o", "--output", required=True, help="snapshot to write (.png; .jpg is lossy)")
+    e.add_argument("--strength", type=float, default=1.0, help="embedding strength: more survives more, shows more")
+    e.add_argument("--jpeg-quality", type=int, default=95, help="quality when writing .jpg")
+    e.add_argument("--report", help="write a JSON report here (host_psnr, host_ssim)")
+    e.set_defaults(func=_run("snapshot3d.train.codec_commands", "embed_command"))
+
+    rs = sub.add_parser("restore", help="recover the scene from a snapshot image (torch)")
+    rs.add_argument("snapshot", help="snapshot image (380x380 .png or .jpg with snapshot3d metadata)")
+    rs.add_argument("-o", "--output", required=True, help="scene file to write (.s3d)")
+    rs.add_argument("--meta", help="the sheet's QR text, when the file carries no metadata")
+    rs.add_argument("--report", help="write a JSON report here")
+    rs.set_defaults(func=_run("snapshot3d.train.codec_commands", "restore_command"))
 
     b = sub.add_parser("bench", help="benchmarks: write CSV, JSON and PNG charts under bench/results/")
     bsub = b.add_subparsers(dest="what", required=True, metavar="WHAT")
@@ -73,13 +94,56 @@ def build_parser() -> argparse.ArgumentParser:
     bf.add_argument("--merge", action="store_true", help="only combine fit_<scene>.json files into fit.*")
     bf.set_defaults(func=_run("snapshot3d.train.bench", "bench_fit_command"))
 
+    bc = bsub.add_parser("codec", help="host fidelity vs restore_psnr through simulate+scan; baselines; charts")
+    bc.add_argument("--out", default="bench/results", help="output folder")
+    bc.add_argument("--scenes", default="snapshot3d/assets/spot.s3d,cache/scenes/lego.s3d",
+                    help="comma-separated scene files to evaluate (spot is never trained on)")
+    bc.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from training)")
+    bc.add_argument("--headline", default="spot,lego", help="scenes (file stems) the summary's medians are over")
+    bc.add_argument("--seeds", type=int, default=3, help="simulated photos per physical severity")
+    bc.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
+    bc.add_argument("--strengths", default="0.5,0.75,1,1.5,2", help="embedding strengths of the trade-off sweep")
+    bc.add_argument("--digital", default="bench/models/codec-digital.npz",
+                    help="baseline a: the codec trained without the channel")
+    bc.set_defaults(func=_run("snapshot3d.train.codec_bench_run", "bench_codec_command"))
+
+    bd = bsub.add_parser("decode", help="torch-free decode of simulated photos: decode_ms per stage, restore_psnr, "
+                                        "e2e_psnr; a speed/accuracy sweep and its chart")
+    bd.add_argument("--out", default="bench/results", help="output folder")
+    bd.add_argument("--seeds", type=int, default=20, help="simulated photos")
+    bd.add_argument("--severity", default="moderate", help="simulated print-and-capture severity")
+    bd.add_argument("--host", default="chelsea", help="bundled host photo (held out from codec training)")
+    bd.add_argument("--sweep-severity", default="jpeg90", help="capture the settings sweep runs on")
+    bd.add_argument("--repeats", type=int, default=3, help="timed decodes per sweep setting (median)")
+    bd.set_defaults(func=_run("snapshot3d.train.decode_bench", "bench_decode_command"))
+
     from snapshot3d.scanner.cli import add_bench_commands, add_commands  # torch-free option builders
     add_commands(sub)
     add_bench_commands(bsub)
 
-    d = sub.add_parser("demo", help="fit and render the built-in default scene (about a minute)")
+    dc = sub.add_parser("decode", help="photo of a printed sheet -> views, turntable, report (no torch)")
+    dc.add_argument("photo", help="photo (.jpg or .png) of a printed snapshot3d sheet")
+    dc.add_argument("-o", "--output", required=True, help="output folder")
+    dc.add_argument("--views", type=int, default=20, help="orbit views")
+    dc.add_argument("--size", type=int, default=380, help="view size in pixels")
+    dc.add_argument("--samples", type=int, default=12, help="samples per pixel (speed against accuracy)")
+    dc.add_argument("--mesh", action="store_true", help="also write mesh.glb (marching cubes, vertex colours)")
+    dc.set_defaults(func=_run("snapshot3d.viewer.commands", "decode_command"))
+
+    ex = sub.add_parser("export", help="export the restore network and the renderer as ONNX, with parity checks")
+    ex.add_argument("-o", "--output", help="folder (default: the package's assets, which decode uses)")
+    ex.set_defaults(func=_run("snapshot3d.export.commands", "export_command"))
+
+    d = sub.add_parser("demo", help="decode the bundled example photo into 20 views (seconds, no torch)")
     d.add_argument("-o", "--output", default="snapshot3d-demo", help="output folder")
-    d.set_defaults(func=_run("snapshot3d.train.demo", "demo_command"))
+    d.set_defaults(func=_run("snapshot3d.viewer.demo", "demo_command"))
+
+    mx = sub.add_parser("make-example", help="make the demo's example photo (embed + sheet + simulate)")
+    mx.add_argument("-o", "--output", help="photo file (default: the package's assets)")
+    mx.add_argument("--host", default="builtin:chelsea", help="host photo")
+    mx.add_argument("--severity", default="jpeg90", help="simulated capture severity")
+    mx.add_argument("--seed", type=int, default=0)
+    mx.set_defaults(func=_run("snapshot3d.train.example", "make_example_command"))
     return p
 
 

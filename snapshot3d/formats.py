@@ -9,7 +9,7 @@ __all__ = [
     "ORBIT_VIEWS", "ORBIT_SIZE", "ORBIT_ELEVATION_DEG", "ORBIT_FOV_DEG", "WORLD_UP", "BACKGROUND",
     "DENSITY_CLAMP", "RENDER_STEPS_PER_BOX", "OCC_RES", "OCC_ALPHA_THRESHOLD", "KB",
     # sheet and scan (issue 3)
-    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "CODEC_ID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
+    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "CODEC_ID", "CODEC_VERSION", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
     "MARKER_GAP", "MARGIN_X", "MARGIN_Y", "COLUMN_LEFT", "COLUMN_RIGHT", "SHEET_BOX", "MARKER_ORIGINS",
     "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "QR_MAGIC", "QR_SEP", "QR_FIELDS",
 ]
@@ -49,7 +49,7 @@ KB = 1000                   # scene_kb is in kilobytes of 1000 bytes
 # layout scaled by an integer factor (each snapshot pixel printed as k x k dots).
 SNAPSHOT_SIZE = 380           # the codec's snapshot is SNAPSHOT_SIZE x SNAPSHOT_SIZE RGB (not ORBIT_SIZE)
 SHEET_FORMAT_VERSION = 1
-CODEC_ID = "none"             # placeholder until the codec exists (issue of the codec): no codec yet
+CODEC_ID = "hinet-1"          # the codec the QR code names (= CODEC_VERSION below)
 ARUCO_DICT = "DICT_4X4_50"    # cv2.aruco predefined dictionary of the sheet's markers
 # Marker ids by sheet format version; the four ids identify the format. Order: top-left, top-right,
 # bottom-right, bottom-left corner of the sheet (as seen upright).
@@ -84,3 +84,14 @@ QR_BOX = (COLUMN_RIGHT, (SNAPSHOT_SIZE - MARKER_SIZE) // 2, COLUMN_RIGHT + MARKE
 QR_MAGIC = "S3D"
 QR_SEP = "|"
 QR_FIELDS = ("version", "codec", "box", "orbit")
+
+# --- the codec (issue 4) ---
+# The secret is the scene's planes, each channel spread over the whole wavelet grid of the snapshot
+# (CODEC_GRID x CODEC_GRID: SNAPSHOT_SIZE after CODEC_LEVELS Haar splits) by separable linear
+# interpolation, so that restoring a texel averages over about (CODEC_GRID / R)^2 grid cells. A codec carries planes up to
+# CODEC_MAX_RES x CODEC_MAX_RES with at most CODEC_CHANNELS channels; fewer channels are zero-padded.
+CODEC_VERSION = "hinet-1"     # id of the codec weights this build embeds and restores with
+CODEC_CHANNELS = 8            # plane channels the secret has room for (3 planes -> 24 secret channels)
+CODEC_MAX_RES = 64            # largest plane resolution the codec carries
+CODEC_LEVELS = 2              # Haar splits of the shipped codec (its weights file stores its own config)
+CODEC_GRID = SNAPSHOT_SIZE >> CODEC_LEVELS   # 95: the secret's grid

@@ -10,13 +10,24 @@ import cv2
 import numpy as np
 from PIL import Image
 
-__all__ = ["to_uint8", "write_png", "write_views", "write_gif", "contact_sheet"]
+__all__ = ["to_uint8", "fit_square", "write_png", "write_views", "write_gif", "contact_sheet"]
 
 
 def to_uint8(img: np.ndarray) -> np.ndarray:
     if img.dtype == np.uint8:
         return img
     return (np.clip(img, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def fit_square(img: np.ndarray, size: int) -> np.ndarray:
+    """(H, W, C) image -> its centred square crop resized to (size, size, C) (area filter when shrinking)."""
+    h, w = img.shape[:2]
+    s = min(h, w)
+    y0, x0 = (h - s) // 2, (w - s) // 2
+    crop = np.ascontiguousarray(img[y0:y0 + s, x0:x0 + s])
+    interp = cv2.INTER_AREA if s >= size else cv2.INTER_CUBIC
+    out = cv2.resize(crop, (size, size), interpolation=interp)
+    return out.reshape(size, size, *img.shape[2:])
 
 
 def write_png(path, rgb: np.ndarray) -> None:

@@ -51,7 +51,8 @@ def test_lossless_round_trip(sheet, snapshot):
     res = scan_image(img)
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) >= 40.0
     assert np.abs(res.corners - np.array(truth["corners"])).max() < 0.05
-    assert res.qr == {"version": 1, "codec": "none", "box": [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0], "orbit": [3.0, 20.0, 40.0]}
+    assert res.qr == {"version": 1, "codec": formats.CODEC_ID, "box": [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0],
+                      "orbit": [3.0, 20.0, 40.0], "target": None, "planes": None, "strength": None}
     assert tuple(res.report()) == REPORT_KEYS and res.confidence > 0.9
 
 
@@ -63,7 +64,7 @@ def test_mild_corners_subpixel(sheet, snapshot, seed):
     assert _snapshot_px_error(res.corners, true).max() <= 0.3
     assert np.linalg.norm(res.corners - true, axis=1).max() <= 0.3 * 3  # and under a pixel of the photo
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) > 18.0
-    assert res.qr is not None and res.qr["codec"] == "none"
+    assert res.qr is not None and res.qr["codec"] == formats.CODEC_ID
 
 
 def test_wrong_codec_in_qr(snapshot):

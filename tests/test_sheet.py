@@ -58,6 +58,17 @@ def test_sheet_pixels_markers_and_qr():
     np.testing.assert_allclose(back.box, meta.box) and np.testing.assert_allclose(back.orbit, meta.orbit)
 
 
+def test_payload_round_trip_with_codec_fields():
+    meta = SheetMeta(box=(-1, -0.5, -1, 1, 0.5, 1), orbit=(3.2, 20, 40), target=(0.1, 0, -0.2), planes=(48, 4),
+                     strength=1.5)
+    back = decode_payload(encode_payload(meta))
+    assert back.planes == (48, 4) and back.strength == 1.5
+    np.testing.assert_allclose(back.target, meta.target) and np.testing.assert_allclose(back.box, meta.box)
+    for bad in ("S3D1|hinet-1|p=64", "S3D1|hinet-1|s=x", "S3D1|hinet-1|t=1,2"):
+        with pytest.raises(ValueError, match="malformed"):
+            decode_payload(bad)
+
+
 def test_payload_rejects_foreign_text():
     with pytest.raises(ValueError):
         decode_payload("https://example.com")

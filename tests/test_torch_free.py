@@ -7,7 +7,10 @@ DECODE_PATH = ["snapshot3d.scanner", "snapshot3d.viewer", "snapshot3d.cameras", 
                "snapshot3d.images", "snapshot3d.metrics", "snapshot3d.cli",
                "snapshot3d.scanner.sheet", "snapshot3d.scanner.simulate", "snapshot3d.scanner.scan",
                "snapshot3d.scanner.commands", "snapshot3d.scanner.bench", "snapshot3d.scanner.cli",
-               "snapshot3d.scanner.imageio_safe", "snapshot3d.scanner.colour", "snapshot3d.scanner.qr"]
+               "snapshot3d.scanner.imageio_safe", "snapshot3d.scanner.colour", "snapshot3d.scanner.qr",
+               "snapshot3d.codec_layout", "snapshot3d.scanner.snapfile", "snapshot3d.scanner.channel_fit",
+               "snapshot3d.viewer.runtime", "snapshot3d.viewer.march", "snapshot3d.viewer.render",
+               "snapshot3d.viewer.decode", "snapshot3d.viewer.commands", "snapshot3d.viewer.demo"]
 
 BLOCKER = """
 import sys

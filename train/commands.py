@@ -12,7 +12,7 @@ import torch
 from tqdm import tqdm
 
 from snapshot3d import formats
-from snapshot3d.cameras import focal_from_fov, orbit_poses
+from snapshot3d.cameras import orbit_cameras as _orbit_cameras
 from snapshot3d.errors import UserError
 from snapshot3d.images import contact_sheet, write_gif, write_png, write_views
 from snapshot3d.scene import Orbit, Scene, load_scene_file, save_scene
@@ -46,10 +46,7 @@ def _bar(desc: str, total: int):
 
 def orbit_cameras(scene: Scene, views: int, size: int):
     """c2w (views, 4, 4), intrinsics (views, 4) of the scene's orbit at `size` x `size` pixels."""
-    o = scene.orbit
-    c2w = orbit_poses(views, o.radius, o.elevation_deg, o.target, up=formats.WORLD_UP).astype(np.float32)
-    f = focal_from_fov(np.deg2rad(o.fov_deg), size)
-    return c2w, np.tile(np.array([f, f, size / 2, size / 2], np.float32), (views, 1))
+    return _orbit_cameras(scene.orbit, views, size)
 
 
 def _default_orbit(posed) -> Orbit:

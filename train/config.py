@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from snapshot3d import formats
 from snapshot3d.errors import UserError
 
-__all__ = ["FitConfig", "DecoderConfig", "LADDER", "check_fit_config"]
+__all__ = ["FitConfig", "DecoderConfig", "CodecConfig", "LADDER", "check_fit_config"]
 
 
 def _f(default, help: str):
@@ -50,6 +50,33 @@ class DecoderConfig:
     lr: float = _f(3e-3, "decoder Adam learning rate, decayed 10x over the run")
     size: int = _f(200, "rendered view size of the training scenes")
     seed: int = _f(0, "random seed")
+
+
+@dataclass
+class CodecConfig:
+    """The hiding network and its training run (stored with the weights and in checkpoints)."""
+
+    levels: int = _f(2, "Haar splits of the host: the secret sits on a grid 2^levels times smaller")
+    blocks: int = _f(4, "coupling blocks (depth)")
+    width: int = _f(32, "hidden channels of each dense subnet")
+    layers: int = _f(3, "convolutions per dense subnet")
+    clamp: float = _f(1.0, "bound of the coupling's log-scale")
+    steps: int = _f(4000, "optimisation steps")
+    batch: int = _f(8, "crops per step")
+    crop: int = _f(96, "host crop side of a training step (the network is fully convolutional)")
+    lr: float = _f(1e-3, "Adam learning rate at the first step (exponential decay to lr/10)")
+    host_target_db: float = _f(38.0, "host PSNR the host-loss weight is steered to (a Lagrange multiplier)")
+    host_target_ramp_db: float = _f(10.0, "the target starts this much lower and rises with the curriculum")
+    low_weight: float = _f(1.0, "extra weight of the host's low-frequency (LL) band")
+    full_every: int = _f(4, "every this many steps, one full 380x380 snapshot with the plane and view losses")
+    view_weight: float = _f(1.0, "weight of the view loss (rays rendered through the frozen decoder)")
+    plane_weight: float = _f(1.0, "weight of the plane loss (unspread secret vs planes)")
+    channel: bool = _f(True, "train through the print-and-capture channel (off: the paper's digital setting, 8-bit only)")
+    ramp: float = _f(0.5, "fraction of the run over which the channel level rises from 0 to its maximum")
+    holdout_scenes: str = _f("spot", "comma-separated scenes never trained on (evaluation)")
+    holdout_hosts: str = _f("coffee,chelsea", "comma-separated host photos never trained on (evaluation)")
+    seed: int = _f(0, "random seed")
+    checkpoint_every: int = _f(100, "steps between checkpoints")
 
 
 def check_fit_config(cfg: FitConfig) -> FitConfig:

@@ -1,0 +1,84 @@
+"""The codec: invertibility, the plane layout, the channel, and the shipped weights' round trip."""
+import numpy as np
+import pytest
+import torch
+
+from snapshot3d import codec_layout, formats
+from snapshot3d.train.channel import apply_channel, round_8bit
+from snapshot3d.train.codec_net import CodecNet, haar, ihaar
+
+
+def _smooth_planes(rng, c=8, r=64):
+    import cv2
+    coarse = rng.uniform(-0.8, 0.8, (3 * c, 8, 8)).astype(np.float32)
+    return np.stack([cv2.resize(p, (r, r), interpolation=cv2.INTER_CUBIC) for p in coarse]).reshape(3, c, r, r).clip(-1, 1)
+
+
+def test_haar_round_trip_and_orthonormal():
+    x = torch.rand(2, 3, 38, 38, dtype=torch.float64)
+    y = haar(x)
+    assert y.shape == (2, 12, 19, 19)
+    assert torch.allclose(ihaar(y), x, atol=1e-12)
+    assert torch.allclose(y.square().sum(), x.square().sum())  # energy preserved
+    assert torch.allclose(y[:, :3], 2 * torch.nn.functional.avg_pool2d(x, 2))  # LL band is the local mean
+
+
+def test_codec_net_inverts_with_true_z_float64():
+    torch.manual_seed(0)
+    net = CodecNet(24, blocks=3, width=8, layers=3, clamp=1.0).double()
+    for p in net.parameters():  # leave the zero init: an identity network would prove nothing
+        torch.nn.init.normal_(p, std=0.05)
+    host, secret = torch.rand(1, 3, 64, 64, dtype=torch.float64), torch.randn(1, 24, 32, 32, dtype=torch.float64)
+    snap, z = net(host, secret)
+    assert snap.shape == host.shape and z.shape == secret.shape
+    assert (snap - host).abs().max() > 1e-3
+    host_back, secret_back = net.reverse(snap, z)
+    assert (host_back - host).abs().max() <= 1e-5 and (secret_back - secret).abs().max() <= 1e-5
+
+
+@pytest.mark.parametrize("res,ch", [(64, 8), (48, 8), (32, 4)])
+def test_layout_round_trip(rng, res, ch):
+    planes = rng.uniform(-1, 1, (3, ch, res, res)).astype(np.float32)
+    secret = codec_layout.planes_to_secret(planes)
+    assert secret.shape == (codec_layout.SECRET_CHANNELS, formats.CODEC_GRID, formats.CODEC_GRID)
+    assert np.abs(codec_layout.secret_to_planes(secret, res, ch) - planes).max() < 1e-4
+    assert np.all(secret.reshape(3, formats.CODEC_CHANNELS, -1)[:, ch:] == 0)  # unused channels stay empty
+
+
+def test_layout_refuses_too_big_planes():
+    with pytest.raises(ValueError, match="at most 8 channels"):
+        codec_layout.planes_to_secret(np.zeros((3, 12, 64, 64), np.float32))
+    with pytest.raises(ValueError, match="64x64"):
+        codec_layout.planes_to_secret(np.zeros((3, 8, 96, 96), np.float32))
+
+
+def test_noise_estimate_tracks_true_error(rng):
+    planes = _smooth_planes(rng)
+    secret = codec_layout.planes_to_secret(planes)
+    for sigma in (0.02, 0.1):
+        noisy = secret + rng.normal(0, sigma, secret.shape).astype(np.float32)
+        true = np.sqrt(np.mean((codec_layout.secret_to_planes(noisy, 64, 8) - planes) ** 2))
+        est = codec_layout.noise_estimate(noisy, 64, 8)
+        assert 0.8 < est / true < 1.25, (sigma, est, true)
+    assert codec_layout.noise_estimate(secret, 64, 8) < 1e-4
+
+
+def test_channel_level_zero_is_8bit_only_and_level_one_hurts():
+    gen = torch.Generator().manual_seed(0)
+    x = torch.nn.functional.interpolate(torch.rand(4, 3, 12, 12, generator=gen), size=(96, 96), mode="bilinear")
+    y0 = apply_channel(x, torch.zeros(4), generator=gen)
+    assert (y0 - x).abs().max() <= 0.5 / 255 + 1e-6
+    x.requires_grad_(True)
+    y1 = apply_channel(x, torch.ones(4), generator=gen)
+    assert y1.shape == x.shape and 0 <= float(y1.detach().min()) and float(y1.detach().max()) <= 1
+    assert 0.02 < float((y1 - x).detach().square().mean().sqrt()) < 0.3
+    y1.sum().backward()
+    assert x.grad is not None and float(x.grad.abs().mean()) > 0.1  # differentiable end to end
+
+
+def test_round_8bit_straight_through():
+    x = torch.tensor([0.1234, 0.9999, 1.3, -0.2], requires_grad=True)
+    y = round_8bit(x)
+    assert torch.allclose(y, torch.tensor([31 / 255, 1.0, 1.0, 0.0]))
+    y.sum().backward()
+    assert torch.all(x.grad == 1)

@@ -1,0 +1,83 @@
+"""`snapshot3d embed` and `restore` with the shipped codec: round trips through a PNG and a JPEG-75
+file, and one-line errors for bad inputs."""
+import json
+from importlib import resources
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from snapshot3d import formats
+from snapshot3d.scene import Orbit, Scene, load_scene_file, save_scene
+
+from helpers import assert_one_line_error, run_cli
+
+SPOT = Path(str(resources.files("snapshot3d") / "assets" / "spot.s3d"))
+
+
+run = run_cli
+
+
+
+def _plane_psnr(a: Scene, b: Scene) -> float:
+    mse = np.mean((a.planes() - b.planes()) ** 2)
+    return 10 * np.log10(4.0 / mse)  # planes span [-1, 1]
+
+
+JPEG75_SHORTFALL = pytest.mark.xfail(strict=True, reason="issue 4 shortfall: the shipped codec does not survive a "
+                                     "JPEG-75 snapshot file (plane PSNR about 14.5 dB, below predicting zeros)")
+
+
+@pytest.mark.parametrize("ext,quality,min_host,min_planes", [
+    (".png", 95, 32.0, 21.0),
+    pytest.param(".jpg", 75, 32.0, 24.0, marks=JPEG75_SHORTFALL),
+])
+def test_embed_restore_round_trip(tmp_path, ext, quality, min_host, min_planes):
+    snap, out = tmp_path / f"snap{ext}", tmp_path / "back.s3d"
+    proc = run("embed", str(SPOT), "--host", "builtin:coffee", "-o", str(snap), "--jpeg-quality", str(quality),
+               "--report", str(tmp_path / "e.json"))
+    assert proc.returncode == 0, proc.stderr
+    rep = json.loads((tmp_path / "e.json").read_text())
+    assert rep["host_psnr"] >= min_host and rep["host_ssim"] > 0.75, rep  # measured 33.4 dB, 0.81 (coffee)
+    assert cv2.imread(str(snap)).shape == (formats.SNAPSHOT_SIZE, formats.SNAPSHOT_SIZE, 3)
+    proc = run("restore", str(snap), "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    orig, back = load_scene_file(SPOT), load_scene_file(out)
+    assert back.codes.shape == orig.codes.shape
+    np.testing.assert_allclose(back.box, orig.box, rtol=1e-3)
+    assert abs(back.orbit.radius - orig.orbit.radius) < 1e-3 * orig.orbit.radius
+    assert _plane_psnr(orig, back) >= min_planes
+
+
+def test_embed_refuses_planes_the_codec_cannot_carry(tmp_path):
+    scene = Scene(codes=np.zeros((3, 12, 64, 64), np.uint8), box=np.array([[-1] * 3, [1] * 3]), orbit=Orbit(3.0))
+    save_scene(scene, tmp_path / "c12.s3d")
+    assert_one_line_error(run("embed", str(tmp_path / "c12.s3d"), "-o", str(tmp_path / "s.png")), "at most 8 channels")
+    assert not (tmp_path / "s.png").exists()
+
+
+def test_restore_bad_inputs(tmp_path):
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.zeros((100, 120, 3), np.uint8))
+    assert_one_line_error(run("restore", str(small), "-o", str(tmp_path / "x.s3d")), "a snapshot is 380x380")
+    bare = tmp_path / "bare.png"
+    cv2.imwrite(str(bare), np.zeros((380, 380, 3), np.uint8))
+    assert_one_line_error(run("restore", str(bare), "-o", str(tmp_path / "x.s3d")), "no snapshot3d metadata")
+    assert_one_line_error(run("restore", str(bare), "-o", str(tmp_path / "x.s3d"), "--meta",
+                        "S3D1|other-codec|b=-1,-1,-1,1,1,1|p=64,8"), "wrong codec id")
+    corrupt = tmp_path / "corrupt.png"
+    corrupt.write_bytes(bare.read_bytes()[:500])
+    assert_one_line_error(run("restore", str(corrupt), "-o", str(tmp_path / "x.s3d")), "corrupt")
+    text = tmp_path / "notes.png"
+    text.write_text("not an image at all")
+    proc = run("restore", str(text), "-o", str(tmp_path / "x.s3d"))
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert not (tmp_path / "x.s3d").exists()
+
+
+def test_embed_bad_host_and_output(tmp_path):
+    assert_one_line_error(run("embed", str(SPOT), "--host", "builtin:nothing", "-o", str(tmp_path / "s.png")),
+                    "unknown bundled host")
+    assert_one_line_error(run("embed", str(SPOT), "-o", str(tmp_path / "s.bmp")), "cannot write")
+    assert_one_line_error(run("embed", str(SPOT), "-o", str(tmp_path / "s.png"), "--strength", "0"), "--strength")

@@ -1,0 +1,33 @@
+"""`snapshot3d make-example`: the bundled example photo the demo decodes: the bundled spot scene
+hidden in a bundled host (`embed`), put on a sheet, captured by the simulator. The default is `jpeg90`
+(the sheet image saved as JPEG 90): the shipped codec does not yet survive physical prints well
+(bench/results/codec.json). Physical presets use a 1600x1200 frame so that the file stays small."""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from snapshot3d.scanner.presets import PRESETS
+from snapshot3d.scanner.sheet import render_sheet
+from snapshot3d.scanner.simulate import simulate
+from snapshot3d.scene import load_scene_file
+
+from .codec import embed_planes, load_codec
+from .codec_commands import load_host, scene_meta
+
+__all__ = ["make_example_command"]
+
+
+def make_example_command(args) -> int:
+    from snapshot3d.scanner.imageio_safe import write_atomic
+    from snapshot3d.viewer.demo import EXAMPLE_PHOTO, EXAMPLE_SCENE, _asset
+
+    scene = load_scene_file(_asset(EXAMPLE_SCENE))
+    snap = embed_planes(load_codec()[0], load_host(args.host), scene.planes())
+    preset = PRESETS[args.severity]
+    preset = replace(preset, frame=(1600, 1200)) if preset.physical else preset
+    data, ext, _ = simulate(render_sheet(snap, scene_meta(scene, 1.0), 4), preset, args.seed)
+    out = Path(args.output) if args.output else _asset(EXAMPLE_PHOTO)
+    write_atomic(out, data)
+    print(f"wrote {out} ({len(data) / 1e3:.0f} kB, {args.severity}, seed {args.seed}, host {args.host})")
+    return 0

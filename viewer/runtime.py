@@ -1,0 +1,40 @@
+"""onnxruntime sessions for the two shipped models (numpy and onnxruntime only; never torch).
+
+Session options are tuned for a phone-class CPU: all graph optimisations, one intra-op thread per
+core, sequential execution, memory-pattern reuse (the shapes repeat chunk after chunk)."""
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+
+__all__ = ["model_path", "session", "model_metadata"]
+
+
+def model_path(kind: str) -> Path:
+    """kind 'restore' or 'shade' -> the packaged model file (see `export.onnx_export.model_names`)."""
+    name = {"restore": f"restore-{formats.CODEC_VERSION}.onnx", "shade": f"shade-{formats.DECODER_VERSION}.onnx"}[kind]
+    return Path(str(resources.files("snapshot3d") / "assets" / name))
+
+
+@lru_cache(maxsize=8)
+def session(path: str, threads: int | None = None):
+    import onnxruntime as ort
+
+    if not Path(path).is_file():
+        raise UserError(f"model not found: {path}; run 'snapshot3d export'")
+    so = ort.SessionOptions()
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    so.intra_op_num_threads = threads or os.cpu_count() or 1
+    so.inter_op_num_threads = 1
+    so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    so.enable_mem_pattern = True
+    return ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
+
+
+def model_metadata(path: str) -> dict:
+    return dict(session(path).get_modelmeta().custom_metadata_map)
