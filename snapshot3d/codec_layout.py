@@ -4,8 +4,8 @@ decoder both use it).
 Each plane channel (R x R) is spread over the whole wavelet grid G x G (G = `formats.CODEC_GRID`)
 by separable linear interpolation, `S = U X U^T` with U (G, R); restoring is the least-squares
 inverse `X = P S P^T`, P = pinv(U) (R, G), so every texel is an average over about (G / R)^2 grid
-cells. The residual of S outside the span of U carries no signal; its energy measures the channel's
-noise without any ground truth (`noise_estimate`).
+cells. The residual of S outside the span of U carries no signal; its energy measures the part of the
+channel's noise that is white (`noise_estimate`); structured errors inside the span go unseen.
 
 Layouts: planes (3, C, R, R) float in [-1, 1] (`formats.PLANE_NAMES` order); secret
 (3 * CODEC_CHANNELS, G, G) float, plane-major (plane k, channel c at index k * CODEC_CHANNELS + c).

@@ -4,7 +4,9 @@
 report with `detected`, `confidence`, `timings_ms` per stage, `decode_ms` (photo file to all views in
 memory) and a quality estimate that needs no ground truth: the channel noise measured in the part of
 the restored secret that carries no signal (`codec_layout.noise_estimate`), as plane-value RMS and as
-the PSNR of the planes it implies."""
+the PSNR of the planes it implies. Caveat, measured by `bench decode`: the learned codec's errors lie
+mostly inside the signal span, so this estimate does not yet track `restore_psnr` (a pilot signal
+needs a codec trained with reserved channels)."""
 from __future__ import annotations
 
 import math
