@@ -83,6 +83,5 @@ def decode_command(args) -> int:
     r = dec.report
     print(f"decoded {args.photo}: {len(dec.views)} views of {args.size}x{args.size} in {r['decode_ms']:.0f} ms "
           f"(scan {r['timings_ms']['scan']:.0f}, restore {r['timings_ms']['restore']:.0f}, render "
-          f"{r['timings_ms']['render']:.0f}); estimated plane PSNR {r['quality_estimate']['plane_psnr_db']:.1f} dB; "
-          f"wrote {out}/")
+          f"{r['timings_ms']['render']:.0f}); wrote {out}/")
     return 0

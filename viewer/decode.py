@@ -78,13 +78,13 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
     planes, secret = restore_planes(res.snapshot, *meta.planes, meta.strength or 1.0)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
-    sess = session(str(model_path("shade")))
-    grids = density_grid(sess, pad_planes(planes), Frame.from_box(scene.box), cfg.occ_res)
+    grids = density_grid(session(str(model_path("shade"))), pad_planes(planes), Frame.from_box(scene.box), cfg.occ_res)
+    sess = session(str(model_path("shade")), 1 if cfg.n_workers() > 1 else None)
     t3 = time.perf_counter()
     c2w, intr = orbit_cameras(scene.orbit, views, size)
     first = []
 
-    def _tick(i):
+    def _tick(i):  # may run on worker threads: list.append is atomic
         if not first:
             first.append(time.perf_counter())
         if on_view is not None:

@@ -6,6 +6,8 @@ planes: (3, C, R, R) float32 in [-1, 1]; cameras: c2w (N, 4, 4) OpenGL, intrinsi
 views: (N, H, W, 3) float32 RGB in [0, 1] over white."""
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +31,12 @@ class RenderConfig:
     """the first-hit probe image is this many times smaller than the view"""
     chunk: int = 2048
     """rays per onnxruntime call (bounds memory; small chunks stay in cache and run faster)"""
+    workers: int = 0
+    """views rendered at once, each by a one-thread session (0: one per core); onnxruntime and most
+    numpy work release the GIL, and this beats one view at a time on a multi-threaded session"""
+
+    def n_workers(self) -> int:
+        return self.workers or os.cpu_count() or 1
 
 
 def pad_planes(planes: np.ndarray) -> np.ndarray:
@@ -73,7 +81,8 @@ def render_views(sess, planes: np.ndarray, box, c2w: np.ndarray, intr: np.ndarra
     sigma, occ = grids if grids is not None else density_grid(sess, planes12, frame, cfg.occ_res)
     margin = 2.0 * float(frame.half_unit.mean()) / cfg.occ_res
     out = np.full((len(c2w), height * width, 3), formats.BACKGROUND, np.float32)
-    for i in range(len(c2w)):
+
+    def one(i):
         o, d = view_rays(c2w[i], intr[i], width, height, frame)
         lo, hi = probe_window(c2w[i], intr[i], width, height, frame, sigma, cfg.probe_div, margin)
         lo, hi = lo.reshape(-1), hi.reshape(-1)
@@ -84,4 +93,11 @@ def render_views(sess, planes: np.ndarray, box, c2w: np.ndarray, intr: np.ndarra
             out[i, idx] = _shade(sess, planes12, pts, delta)[0]
         if on_view is not None:
             on_view(i)
+
+    if cfg.n_workers() > 1 and len(c2w) > 1:
+        with ThreadPoolExecutor(cfg.n_workers()) as pool:
+            list(pool.map(one, range(len(c2w))))
+    else:
+        for i in range(len(c2w)):
+            one(i)
     return np.clip(out.reshape(len(c2w), height, width, 3), 0, 1)
