@@ -5,20 +5,16 @@ import json
 from pathlib import Path
 
 from snapshot3d.errors import UserError
+from snapshot3d.paths import asset
 
-__all__ = ["export_command", "assets_dir"]
-
-
-def assets_dir() -> Path:
-    from importlib import resources
-    return Path(str(resources.files("snapshot3d") / "assets"))
+__all__ = ["export_command"]
 
 
 def export_command(args) -> int:
     from .onnx_export import export_all
     from .parity import restore_parity, shade_parity
 
-    out = Path(args.output) if args.output else assets_dir()
+    out = Path(args.output) if args.output else asset()
     if out.exists() and not out.is_dir():
         raise UserError(f"{out} is a file; export writes a folder of .onnx models")
     models = export_all(out)

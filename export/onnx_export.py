@@ -10,6 +10,7 @@ from pathlib import Path
 import torch
 
 from snapshot3d import formats
+from snapshot3d.paths import model_file
 
 from .models import RESTORE_INPUTS, RESTORE_OUTPUTS, SHADE_INPUTS, SHADE_OUTPUTS, RestoreGraph, ShadeGraph
 
@@ -20,7 +21,7 @@ OPSET = 17
 
 def model_names() -> dict:
     """File names of the two models (they carry the versions they were made from)."""
-    return {"restore": f"restore-{formats.CODEC_VERSION}.onnx", "shade": f"shade-{formats.DECODER_VERSION}.onnx"}
+    return {k: model_file(k) for k in ("restore", "shade")}
 
 
 def _metadata() -> dict:

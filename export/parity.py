@@ -11,10 +11,9 @@ __all__ = ["shade_parity", "restore_parity"]
 
 
 def _spot():
-    from importlib import resources
-
+    from snapshot3d.paths import asset
     from snapshot3d.scene import load_scene_file
-    return load_scene_file(resources.files("snapshot3d") / "assets" / "spot.s3d")
+    return load_scene_file(asset("spot.s3d"))
 
 
 def shade_parity(shade_path, size: int = 96) -> dict:

@@ -76,6 +76,10 @@ def measure_residual(digital: np.ndarray, rectified: np.ndarray) -> dict:
 def bench_channel_command(args) -> int:
     host = cv2.resize(load_background("astronaut"), (formats.SNAPSHOT_SIZE,) * 2, interpolation=cv2.INTER_AREA)
     sheet = render_sheet(host, SheetMeta(), 4)
+    from .presets import SEVERITIES
+    bad = [s for s in args.severities.split(",") if s not in SEVERITIES]
+    if bad:
+        raise UserError(f"unknown severity {bad[0]!r}; choose from {', '.join(SEVERITIES)}")
     rows = []
     for sev in args.severities.split(","):
         for seed in range(args.seeds):

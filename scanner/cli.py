@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from snapshot3d.lazy import lazy_command as _run
 
-__all__ = ["add_commands", "add_bench_commands"]
+__all__ = ["add_commands", "add_bench_commands", "SEVERITY_NAMES"]
 
-_SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")  # = scanner.presets.SEVERITIES
+SEVERITY_NAMES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")  # = scanner.presets.SEVERITIES
 
 
 def add_commands(sub) -> None:
@@ -24,7 +24,7 @@ def add_commands(sub) -> None:
     m.add_argument("sheet", help="sheet image (.png) written by `snapshot3d sheet`")
     m.add_argument("-o", "--output", required=True, help="photo to write (.jpg; .png keeps the channel's JPEG "
                                                          "losslessly; severity none needs .png)")
-    m.add_argument("--severity", default="mild", choices=_SEVERITIES, help="channel preset (default: mild)")
+    m.add_argument("--severity", default="mild", choices=SEVERITY_NAMES, help="channel preset (default: mild)")
     m.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same photo")
     m.add_argument("--truth", help="write the true snapshot corners and the preset's parameters here (JSON)")
     m.set_defaults(func=_run("snapshot3d.scanner.commands", "simulate_command"))

@@ -9,6 +9,7 @@ import sys
 
 from .errors import UserError
 from .lazy import lazy_command as _run
+from .scanner.cli import SEVERITY_NAMES
 
 __all__ = ["main", "build_parser"]
 
@@ -111,9 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
                                         "e2e_psnr; a speed/accuracy sweep and its chart")
     bd.add_argument("--out", default="bench/results", help="output folder")
     bd.add_argument("--seeds", type=int, default=20, help="simulated photos")
-    bd.add_argument("--severity", default="moderate", help="simulated print-and-capture severity")
+    bd.add_argument("--severity", default="moderate", choices=SEVERITY_NAMES, help="simulated print-and-capture severity")
     bd.add_argument("--host", default="chelsea", help="bundled host photo (held out from codec training)")
-    bd.add_argument("--sweep-severity", default="jpeg90", help="capture the settings sweep runs on")
+    bd.add_argument("--sweep-severity", default="jpeg90", choices=SEVERITY_NAMES, help="capture the settings sweep runs on")
     bd.add_argument("--repeats", type=int, default=3, help="timed decodes per sweep setting (median)")
     bd.set_defaults(func=_run("snapshot3d.train.decode_bench", "bench_decode_command"))
 
@@ -141,7 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     mx = sub.add_parser("make-example", help="make the demo's example photo (embed + sheet + simulate)")
     mx.add_argument("-o", "--output", help="photo file (default: the package's assets)")
     mx.add_argument("--host", default="builtin:chelsea", help="host photo")
-    mx.add_argument("--severity", default="jpeg90", help="simulated capture severity")
+    mx.add_argument("--severity", default="jpeg90", choices=SEVERITY_NAMES, help="simulated capture severity")
     mx.add_argument("--seed", type=int, default=0)
     mx.set_defaults(func=_run("snapshot3d.train.example", "make_example_command"))
     return p

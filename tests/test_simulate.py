@@ -84,3 +84,9 @@ def test_blur_kernel():
     k = blur_kernel(2.0, 6.0, 0.3)
     assert abs(k.sum() - 1) < 1e-5 and k.shape[0] == k.shape[1] and k.shape[0] % 2 == 1
     assert k[k.shape[0] // 2, k.shape[0] // 2] == pytest.approx(k.max(), rel=0.5)
+
+
+def test_cli_severity_names_match_presets():
+    from snapshot3d.scanner.cli import SEVERITY_NAMES
+    from snapshot3d.scanner.presets import SEVERITIES
+    assert SEVERITY_NAMES == SEVERITIES

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, fields
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +18,7 @@ import torch
 
 from snapshot3d import codec_layout, formats
 from snapshot3d.errors import UserError
+from snapshot3d.paths import asset
 
 from .codec_net import CodecNet
 from .config import CodecConfig
@@ -36,7 +36,7 @@ def secret_grid(net: CodecNet) -> int:
 
 
 def codec_path(version: str = formats.CODEC_VERSION) -> Path:
-    return Path(str(resources.files("snapshot3d") / "assets" / f"codec-{version}.npz"))
+    return asset(f"codec-{version}.npz")
 
 
 def save_codec(net: CodecNet, cfg: CodecConfig, path: Path) -> None:

@@ -122,7 +122,10 @@ def train_codec_command(args) -> int:
     cfg = CodecConfig(**{f.name: getattr(args, f.name) for f in fields(CodecConfig)})
     out = Path(args.output) if args.output else codec_path()
     scene_dir = Path(args.scenes_dir)
-    data = load_codec_data(scene_dir, set(cfg.holdout_scenes.split(",")), set(cfg.holdout_hosts.split(",")))
+    try:
+        data = load_codec_data(scene_dir, set(cfg.holdout_scenes.split(",")), set(cfg.holdout_hosts.split(",")))
+    except ValueError as e:
+        raise UserError(f"{e}; fit training scenes there first (see the README's codec section)") from None
     ckpt = out.with_name(out.name + ".ckpt")
     t0 = time.time()
     summary = train_codec(cfg, data, out, checkpoint=ckpt, log=lambda m: print(m, flush=True))

@@ -53,12 +53,13 @@ def _pareto(points):
 
 
 def bench_decode_command(args) -> int:
-    from snapshot3d.viewer.demo import EXAMPLE_SCENE, _asset
+    from snapshot3d.paths import asset
+    from snapshot3d.viewer.demo import EXAMPLE_SCENE
     from snapshot3d.scene import load_scene_file
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    scene = load_scene_file(_asset(EXAMPLE_SCENE))
+    scene = load_scene_file(asset(EXAMPLE_SCENE))
     snap = embed_planes(load_codec()[0], load_host("builtin:" + args.host), scene.planes())
     sheet = render_sheet(snap, scene_meta(scene, 1.0), 4)
     ref = {formats.ORBIT_SIZE: render_scene(scene, formats.ORBIT_VIEWS, formats.ORBIT_SIZE, progress=False)}

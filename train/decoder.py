@@ -9,7 +9,6 @@ import json
 import math
 import time
 from dataclasses import asdict
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ import torch
 
 from snapshot3d import formats
 from snapshot3d.errors import UserError
+from snapshot3d.paths import asset
 
 from .field import Decoder
 from .config import DecoderConfig, FitConfig
@@ -26,7 +26,7 @@ __all__ = ["DecoderConfig", "train_decoder", "load_decoder", "decoder_path"]
 
 
 def decoder_path(version: str = formats.DECODER_VERSION) -> Path:
-    return Path(str(resources.files("snapshot3d") / "assets" / f"decoder-{version}.npz"))
+    return asset(f"decoder-{version}.npz")
 
 
 def load_decoder(version: str = formats.DECODER_VERSION) -> Decoder:

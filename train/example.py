@@ -20,14 +20,15 @@ __all__ = ["make_example_command"]
 
 def make_example_command(args) -> int:
     from snapshot3d.scanner.imageio_safe import write_atomic
-    from snapshot3d.viewer.demo import EXAMPLE_PHOTO, EXAMPLE_SCENE, _asset
+    from snapshot3d.paths import asset
+    from snapshot3d.viewer.demo import EXAMPLE_PHOTO, EXAMPLE_SCENE
 
-    scene = load_scene_file(_asset(EXAMPLE_SCENE))
+    scene = load_scene_file(asset(EXAMPLE_SCENE))
     snap = embed_planes(load_codec()[0], load_host(args.host), scene.planes())
     preset = PRESETS[args.severity]
     preset = replace(preset, frame=(1600, 1200)) if preset.physical else preset
     data, ext, _ = simulate(render_sheet(snap, scene_meta(scene, 1.0), 4), preset, args.seed)
-    out = Path(args.output) if args.output else _asset(EXAMPLE_PHOTO)
+    out = Path(args.output) if args.output else asset(EXAMPLE_PHOTO)
     write_atomic(out, data)
     print(f"wrote {out} ({len(data) / 1e3:.0f} kB, {args.severity}, seed {args.seed}, host {args.host})")
     return 0

@@ -22,13 +22,10 @@ def decoded_mesh(sess, planes: np.ndarray, box, res: int = 96):
     from snapshot3d.meshing import density_to_mesh, unit_grid
 
     from .march import Frame
-    from .render import pad_planes
+    from .render import pad_planes, point_alpha
 
     p12, step = pad_planes(planes), Frame.from_box(box).step
-    pts = unit_grid(res).reshape(-1, 1, 3)
-    alpha = np.concatenate([sess.run(None, {"planes": p12, "points": c, "delta": np.full((len(c), 1), step, np.float32)})[1]
-                            for c in np.array_split(pts, max(1, len(pts) // 65536))])
-    sigma = -np.log1p(-np.minimum(alpha, 1 - 1e-6)) / step
+    _, sigma = point_alpha(sess, p12, unit_grid(res), step)
 
     def colours(unit):
         return sess.run(None, {"planes": p12, "points": unit.reshape(-1, 1, 3).astype(np.float32),

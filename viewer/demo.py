@@ -3,21 +3,17 @@ photo, put on a sheet and captured by the simulator as a JPEG-90 file; `snapshot
 measure `restore_psnr` against the bundled original scene. numpy, OpenCV and onnxruntime only."""
 from __future__ import annotations
 
-from importlib import resources
 from pathlib import Path
 
 from snapshot3d import formats
 from snapshot3d.metrics import psnr
+from snapshot3d.paths import asset
 from snapshot3d.scene import load_scene_file
 
 __all__ = ["demo_command", "EXAMPLE_PHOTO", "EXAMPLE_SCENE"]
 
 EXAMPLE_PHOTO = "example-photo.jpg"
 EXAMPLE_SCENE = "spot.s3d"
-
-
-def _asset(name: str) -> Path:
-    return Path(str(resources.files("snapshot3d") / "assets" / name))
 
 
 def demo_command(args) -> int:
@@ -28,7 +24,7 @@ def demo_command(args) -> int:
     from .render import render_views
     from .runtime import model_path, session
 
-    photo, original = _asset(EXAMPLE_PHOTO), load_scene_file(_asset(EXAMPLE_SCENE))
+    photo, original = asset(EXAMPLE_PHOTO), load_scene_file(asset(EXAMPLE_SCENE))
     out = Path(args.output)
     print(f"decoding the bundled example {photo.name} (the sheet captured as a JPEG-90 file by the simulator; "
           f"physical prints do not survive the current codec well, see bench/results/codec.json) ...", flush=True)

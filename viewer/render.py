@@ -16,7 +16,7 @@ from snapshot3d import formats
 
 from .march import Frame, probe_window, view_rays, window_samples
 
-__all__ = ["RenderConfig", "pad_planes", "density_grid", "render_views"]
+__all__ = ["RenderConfig", "pad_planes", "point_alpha", "density_grid", "render_views"]
 
 
 @dataclass(frozen=True)
@@ -51,14 +51,21 @@ def _shade(sess, planes12, pts, delta):
     return rgb, acc
 
 
-def density_grid(sess, planes12: np.ndarray, frame: Frame, res: int, chunk: int = 1 << 16):
+def point_alpha(sess, planes12: np.ndarray, points: np.ndarray, step: float, chunk: int = 1 << 16):
+    """alpha (M,) of one step of length `step` at points (M, 3) in unit coordinates, and the density
+    (M,) it implies (sigma = -log(1 - alpha) / step)."""
+    pts = points.reshape(-1, 1, 3).astype(np.float32)
+    alpha = np.concatenate([_shade(sess, planes12, p, np.full((len(p), 1), step, np.float32))[1]
+                            for p in np.array_split(pts, max(1, len(pts) // chunk))])
+    return alpha, (-np.log1p(-np.minimum(alpha, 1 - 1e-6)) / step).astype(np.float32)
+
+
+def density_grid(sess, planes12: np.ndarray, frame: Frame, res: int):
     """Density at the cell centres (res, res, res) float32 and the occupancy (bool, cells whose
     one-step alpha exceeds the threshold, dilated by one cell)."""
     c = (np.arange(res, dtype=np.float32) + 0.5) / res * 2 - 1
-    pts = np.stack(np.meshgrid(c, c, c, indexing="ij"), -1).reshape(-1, 1, 3)
-    alpha = np.concatenate([_shade(sess, planes12, p, np.full((len(p), 1), frame.step, np.float32))[1]
-                            for p in np.array_split(pts, max(1, len(pts) // chunk))])
-    sigma = (-np.log1p(-np.minimum(alpha, 1 - 1e-6)) / frame.step).reshape(res, res, res).astype(np.float32)
+    alpha, sigma = point_alpha(sess, planes12, np.stack(np.meshgrid(c, c, c, indexing="ij"), -1), frame.step)
+    sigma = sigma.reshape(res, res, res)
     occ = (alpha > formats.OCC_ALPHA_THRESHOLD).reshape(res, res, res)
     for ax in range(3):  # separable max filter = 3x3x3 dilation
         occ = occ | np.roll(occ, 1, ax) & _edge(res, ax, 1) | np.roll(occ, -1, ax) & _edge(res, ax, -1)

@@ -6,19 +6,17 @@ from __future__ import annotations
 
 import os
 from functools import lru_cache
-from importlib import resources
 from pathlib import Path
 
-from snapshot3d import formats
 from snapshot3d.errors import UserError
+from snapshot3d.paths import asset, model_file
 
 __all__ = ["model_path", "session", "model_metadata"]
 
 
 def model_path(kind: str) -> Path:
-    """kind 'restore' or 'shade' -> the packaged model file (see `export.onnx_export.model_names`)."""
-    name = {"restore": f"restore-{formats.CODEC_VERSION}.onnx", "shade": f"shade-{formats.DECODER_VERSION}.onnx"}[kind]
-    return Path(str(resources.files("snapshot3d") / "assets" / name))
+    """kind 'restore' or 'shade' -> the packaged model file."""
+    return asset(model_file(kind))
 
 
 @lru_cache(maxsize=8)

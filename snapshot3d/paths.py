@@ -1,0 +1,21 @@
+"""Where the package's shipped files live (torch-free): `snapshot3d/assets/` holds the decoder and
+codec weights, the two ONNX models, the default scene and the demo's example photo."""
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from . import formats
+
+__all__ = ["asset", "model_file"]
+
+
+def asset(name: str = "") -> Path:
+    """Path of a shipped file (the assets folder itself for "")."""
+    base = Path(str(resources.files("snapshot3d") / "assets"))
+    return base / name if name else base
+
+
+def model_file(kind: str) -> str:
+    """File name of an exported model: kind 'restore' (names the codec) or 'shade' (names the decoder)."""
+    return {"restore": f"restore-{formats.CODEC_VERSION}.onnx", "shade": f"shade-{formats.DECODER_VERSION}.onnx"}[kind]
