@@ -1,12 +1,12 @@
-"""torch -> ONNX: the restore network and the renderer's shading graph, with parity checks.
+"""torch -> ONNX: the restore network and the renderer's two field graphs, with parity checks.
 
-Public surface: `export_all(out_dir)` (export.onnx_export), `shade_parity`, `restore_parity`
-(export.parity), the graphs `RestoreGraph`, `ShadeGraph` (export.models)."""
+Public surface: `export_all(out_dir)` (export.onnx_export), `field_parity`, `restore_parity`
+(export.parity), the graphs `RestoreGraph`, `ProjectGraph`, `FieldGraph` (export.models)."""
 
-__all__ = ["export_all", "shade_parity", "restore_parity", "RestoreGraph", "ShadeGraph"]
+__all__ = ["export_all", "field_parity", "restore_parity", "RestoreGraph", "ProjectGraph", "FieldGraph"]
 
-_WHERE = {"export_all": "onnx_export", "shade_parity": "parity", "restore_parity": "parity",
-          "RestoreGraph": "models", "ShadeGraph": "models"}
+_WHERE = {"export_all": "onnx_export", "field_parity": "parity", "restore_parity": "parity",
+          "RestoreGraph": "models", "ProjectGraph": "models", "FieldGraph": "models"}
 
 
 def __getattr__(name):

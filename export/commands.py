@@ -1,4 +1,4 @@
-"""`snapshot3d export -o DIR`: both ONNX models, checked against torch on real inputs."""
+"""`snapshot3d export -o DIR`: the ONNX models, checked against torch on real inputs."""
 from __future__ import annotations
 
 import json
@@ -12,17 +12,18 @@ __all__ = ["export_command"]
 
 def export_command(args) -> int:
     from .onnx_export import export_all
-    from .parity import restore_parity, shade_parity
+    from .parity import field_parity, restore_parity
 
     out = Path(args.output) if args.output else asset()
     if out.exists() and not out.is_dir():
         raise UserError(f"{out} is a file; export writes a folder of .onnx models")
     models = export_all(out)
-    parity = {"shade": shade_parity(models["shade"]["path"]),
-              "restore": restore_parity(models["restore"]["path"], models["shade"]["path"])}
+    paths = {k: v["path"] for k, v in models.items()}
+    parity = {"field": field_parity(paths["project"], paths["field"]),
+              "restore": restore_parity(paths["restore"], paths["project"], paths["field"])}
     report = {"models": models, "parity": parity}
     (out / "export.json").write_text(json.dumps(report, indent=2) + "\n")
-    bad = parity["shade"]["views_max_abs_diff"] > 1e-3 or parity["restore"]["restore_psnr_diff_db"] > 0.05
+    bad = parity["field"]["views_max_abs_diff"] > 1e-3 or parity["restore"]["restore_psnr_diff_db"] > 0.05
     print(json.dumps(parity))
     if bad:
         raise UserError("ONNX parity check failed: the exported models do not match torch (see export.json)")

@@ -1,4 +1,4 @@
-"""torch -> ONNX for the restore network and the renderer's shading graph: pinned opset, fixed input
+"""torch -> ONNX for the restore network and the renderer's two field graphs: pinned opset, fixed input
 and output names, metadata (codec id, decoder version, orbit), `onnx.checker`, and a parity check
 against torch on the same inputs (an export that drifts fails; it is never skipped)."""
 from __future__ import annotations
@@ -12,16 +12,18 @@ import torch
 from snapshot3d import formats
 from snapshot3d.paths import model_file
 
-from .models import RESTORE_INPUTS, RESTORE_OUTPUTS, SHADE_INPUTS, SHADE_OUTPUTS, RestoreGraph, ShadeGraph
+from .models import (FIELD_INPUTS, FIELD_OUTPUTS, PROJECT_INPUTS, PROJECT_OUTPUTS, RESTORE_INPUTS, RESTORE_OUTPUTS,
+                     FieldGraph, ProjectGraph, RestoreGraph)
 
-__all__ = ["OPSET", "export_restore", "export_shade", "export_all", "model_names"]
+__all__ = ["OPSET", "MODEL_KINDS", "export_restore", "export_project", "export_field", "export_all", "model_names"]
 
 OPSET = 17
+MODEL_KINDS = ("restore", "project", "field")
 
 
 def model_names() -> dict:
-    """File names of the two models (they carry the versions they were made from)."""
-    return {k: model_file(k) for k in ("restore", "shade")}
+    """File names of the models (they carry the versions they were made from)."""
+    return {k: model_file(k) for k in MODEL_KINDS}
 
 
 def _metadata() -> dict:
@@ -61,24 +63,31 @@ def export_restore(codec, path: Path) -> int:
                    "snapshot3d restore")
 
 
-def export_shade(decoder, path: Path) -> int:
+def export_project(decoder, path: Path) -> int:
     planes = torch.rand(3, formats.C_MAX, 64, 64) * 2 - 1
-    pts = torch.rand(128, 16, 3) * 2 - 1
-    dynamic = {"planes": {2: "R", 3: "R"}, "points": {0: "N", 1: "S"}, "delta": {0: "N", 1: "S"},
-               "rgb": {0: "N"}, "acc": {0: "N"}}
-    return _export(ShadeGraph(decoder).eval(), (planes, pts, torch.full((128, 16), 0.02)), SHADE_INPUTS, SHADE_OUTPUTS,
-                   dynamic, path, "snapshot3d shade")
+    dynamic = {"planes": {2: "R", 3: "R"}, "interp": {0: "B", 1: "R"}, "tables": {1: "T"}}
+    return _export(ProjectGraph(decoder).eval(), (planes, torch.rand(96, 64)), PROJECT_INPUTS, PROJECT_OUTPUTS,
+                   dynamic, path, "snapshot3d project")
+
+
+def export_field(decoder, path: Path) -> int:
+    tables = torch.rand(3, 96 * 96, decoder.hidden)
+    dynamic = {"tables": {1: "T"}, "rows": {0: "M"}, "density_logit": {0: "M"}, "rgb": {0: "M"}}
+    return _export(FieldGraph(decoder).eval(), (tables, torch.randint(0, 96 * 96, (2048, 3))), FIELD_INPUTS,
+                   FIELD_OUTPUTS, dynamic, path, "snapshot3d field")
 
 
 def export_all(out: Path, log=print) -> dict:
-    """Write both models into `out`; returns their paths and sizes."""
+    """Write the models into `out`; returns their paths and sizes."""
     from snapshot3d.train.codec import load_codec
     from snapshot3d.train.decoder import load_decoder
 
     out.mkdir(parents=True, exist_ok=True)
     names = model_names()
     t0 = time.time()
+    decoder = load_decoder()
     sizes = {"restore": export_restore(load_codec()[0], out / names["restore"]),
-             "shade": export_shade(load_decoder(), out / names["shade"])}
+             "project": export_project(decoder, out / names["project"]),
+             "field": export_field(decoder, out / names["field"])}
     log(f"exported {', '.join(f'{names[k]} ({v / 1e6:.2f} MB)' for k, v in sizes.items())} in {time.time() - t0:.1f} s")
     return {k: {"path": str(out / names[k]), "bytes": v} for k, v in sizes.items()}

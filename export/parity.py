@@ -7,7 +7,7 @@ import torch
 
 from snapshot3d import formats
 
-__all__ = ["shade_parity", "restore_parity"]
+__all__ = ["TorchRun", "torch_field_models", "field_parity", "restore_parity"]
 
 
 def _spot():
@@ -16,30 +16,49 @@ def _spot():
     return load_scene_file(asset("spot.s3d"))
 
 
-def shade_parity(shade_path, size: int = 96) -> dict:
-    """Max abs difference of the views of spot's planes: the same samples shaded by torch and ORT."""
+class TorchRun:
+    """An onnxruntime session's `run`, computed by the torch graph it was exported from."""
+
+    def __init__(self, graph, inputs):
+        self.graph, self.inputs = graph.eval(), inputs
+
+    def run(self, _, feeds):
+        with torch.no_grad():
+            out = self.graph(*(torch.from_numpy(np.asarray(feeds[k])) for k in self.inputs))
+        return [t.numpy() for t in (out if isinstance(out, tuple) else (out,))]
+
+
+def torch_field_models():
+    """`viewer.runtime.FieldModels` computed by torch from the shipped decoder."""
     from snapshot3d.train.decoder import load_decoder
+    from snapshot3d.viewer.runtime import FieldModels
+
+    from .models import FIELD_INPUTS, PROJECT_INPUTS, FieldGraph, ProjectGraph
+
+    dec = load_decoder()
+    return FieldModels(TorchRun(ProjectGraph(dec), PROJECT_INPUTS), TorchRun(FieldGraph(dec), FIELD_INPUTS))
+
+
+def _ort_field_models(project_path, field_path):
+    from snapshot3d.viewer.runtime import FieldModels, session
+    return FieldModels(session(str(project_path)), session(str(field_path)))
+
+
+def field_parity(project_path, field_path, size: int = 96) -> dict:
+    """Max abs difference of the views of spot's planes rendered through the ORT graphs and through
+    torch (the same renderer around them)."""
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.viewer.render import render_views
-    from snapshot3d.viewer.runtime import session
-
-    from .models import ShadeGraph
 
     scene = _spot()
-    graph = ShadeGraph(load_decoder()).eval()
-
-    class _TorchSess:  # the ORT session's `run`, computed by torch
-        def run(self, _, feeds):
-            with torch.no_grad():
-                return [t.numpy() for t in graph(*(torch.from_numpy(feeds[k]) for k in ("planes", "points", "delta")))]
-
     c2w, intr = orbit_cameras(scene.orbit, 3, size)
-    ort_views = render_views(session(str(shade_path)), scene.planes(), scene.box, c2w, intr, size, size)
-    torch_views = render_views(_TorchSess(), scene.planes(), scene.box, c2w, intr, size, size)
+    ort_views = render_views(_ort_field_models(project_path, field_path), scene.planes(), scene.box, c2w, intr,
+                             size, size)
+    torch_views = render_views(torch_field_models(), scene.planes(), scene.box, c2w, intr, size, size)
     return {"views_max_abs_diff": float(np.abs(ort_views - torch_views).max())}
 
 
-def restore_parity(restore_path, shade_path, size: int = 96) -> dict:
+def restore_parity(restore_path, project_path, field_path, size: int = 96) -> dict:
     """restore_psnr of spot hidden in a bundled host, restored by torch and by ORT (same renderer)."""
     from snapshot3d import codec_layout
     from snapshot3d.metrics import psnr
@@ -57,12 +76,12 @@ def restore_parity(restore_path, shade_path, size: int = 96) -> dict:
     x = (snap.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
     sec_ort = session(str(restore_path)).run(None, {"snapshot": np.ascontiguousarray(x)})[0][0]
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
-    shade = session(str(shade_path))
-    ref = render_views(shade, scene.planes(), scene.box, c2w, intr, size, size)
+    models = _ort_field_models(project_path, field_path)
+    ref = render_views(models, scene.planes(), scene.box, c2w, intr, size, size)
 
     def score(secret):
         planes = codec_layout.secret_to_planes(secret, scene.resolution, scene.channels)
-        return psnr(render_views(shade, dequantize_planes(quantize_planes(planes)), scene.box, c2w, intr, size, size), ref)
+        return psnr(render_views(models, dequantize_planes(quantize_planes(planes)), scene.box, c2w, intr, size, size), ref)
     a, b = score(sec_torch), score(sec_ort)
     return {"secret_max_abs_diff": float(np.abs(sec_torch - sec_ort).max()), "restore_psnr_torch": a,
             "restore_psnr_onnx": b, "restore_psnr_diff_db": abs(a - b)}

@@ -22,6 +22,7 @@ from .detect import detect_markers, make_detector, refine_corners
 from .diagnose import SHARPNESS_MIN, exposure_problem, sharpness
 from .fit import Fit, fit_geometry
 from .imageio_safe import read_image_bgr
+from .pilot import pilot_psnr
 from .qr import check_codec, decode_payload, read_qr
 from .rectify import OVERSAMPLE, photo_px_per_unit, rectify_sheet
 
@@ -31,13 +32,14 @@ DETECT_SIDE = 1400        # longest side of the detection copy (pixels)
 MIN_SNAPSHOT_PX = 380     # at least one photo pixel per snapshot pixel: below, the snapshot is aliased
 MIN_CONTRAST = 0.3        # (paper - marker ink) / paper below this: washed out
 QR_MODULES = (21, 25, 29, 33)  # QR versions 1-4: the sheet's payloads fit these
-REPORT_KEYS = ("detected", "corners", "reprojection_px", "confidence", "qr", "timings_ms")
+REPORT_KEYS = ("detected", "corners", "reprojection_px", "confidence", "pilot_psnr", "qr", "timings_ms")
 
 
 @dataclass
 class ScanResult:
     """snapshot: (380, 380, 3) uint8 RGB, colour-corrected. corners: (4, 2) photo pixels, clockwise from
-    the snapshot's top-left. fit: the geometry (homography, lens)."""
+    the snapshot's top-left. fit: the geometry (homography, lens). pilot_psnr: how well the markers
+    came through the channel (`scanner.pilot`), dB."""
 
     snapshot: np.ndarray
     corners: np.ndarray
@@ -45,13 +47,14 @@ class ScanResult:
     confidence: float
     qr: dict | None
     timings_ms: dict
+    pilot_psnr: float = float("nan")
     markers: list = field(default_factory=list)
     fit: Fit | None = None
 
     def report(self) -> dict:
         return {"detected": True, "corners": np.round(self.corners, 3).tolist(),
                 "reprojection_px": round(float(self.reprojection_px), 4), "confidence": round(float(self.confidence), 3),
-                "qr": self.qr, "timings_ms": {k: round(v, 2) for k, v in self.timings_ms.items()}}
+                "pilot_psnr": round(float(self.pilot_psnr), 2), "qr": self.qr, "timings_ms": {k: round(v, 2) for k, v in self.timings_ms.items()}}
 
 
 @lru_cache(maxsize=1)
@@ -163,6 +166,7 @@ def scan_image(img: np.ndarray) -> ScanResult:
     n = formats.SNAPSHOT_SIZE
     sx0, sy0 = formats.SHEET_BOX[:2]
     snapshot = apply_colour(model, lo[-sy0:-sy0 + n, -sx0:-sx0 + n], (0, 0, n, n))
+    pilot = pilot_psnr(lo, model, mids)
     t["colour"] = (time.perf_counter() - t1) * 1e3
     t1 = time.perf_counter()
     qr = _read_qr(hi, model)
@@ -170,7 +174,7 @@ def scan_image(img: np.ndarray) -> ScanResult:
     t["total"] = (time.perf_counter() - t0) * 1e3
     rms_snap = fit.rms_px / photo_px_per_unit(fit)
     conf = len(mids) / 4 * float(np.exp(-max(0.0, rms_snap - 0.3))) * (1.0 if qr else 0.8)
-    return ScanResult(snapshot, corners, fit.rms_px, conf, qr, t, mids, fit)
+    return ScanResult(snapshot, corners, fit.rms_px, conf, qr, t, pilot, mids, fit)
 
 
 @lru_cache(maxsize=1)

@@ -116,6 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
     bd.add_argument("--host", default="chelsea", help="bundled host photo (held out from codec training)")
     bd.add_argument("--sweep-severity", default="jpeg90", choices=SEVERITY_NAMES, help="capture the settings sweep runs on")
     bd.add_argument("--repeats", type=int, default=3, help="timed decodes per sweep setting (median)")
+    bd.add_argument("--calib-seeds", type=int, default=4, help="captures per severity for the quality estimate's line")
+    bd.add_argument("--calibration", default=None,
+                    help="where to write that line (default: the package's file, which decode reads)")
     bd.set_defaults(func=_run("snapshot3d.train.decode_bench", "bench_decode_command"))
 
     from snapshot3d.scanner.cli import add_bench_commands, add_commands  # torch-free option builders
@@ -127,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     dc.add_argument("-o", "--output", required=True, help="output folder")
     dc.add_argument("--views", type=int, default=20, help="orbit views")
     dc.add_argument("--size", type=int, default=380, help="view size in pixels")
-    dc.add_argument("--samples", type=int, default=12, help="samples per pixel (speed against accuracy)")
+    dc.add_argument("--samples", type=int, default=None, help="samples per pixel (speed against accuracy; default 16)")
     dc.add_argument("--mesh", action="store_true", help="also write mesh.glb (marching cubes, vertex colours)")
     dc.set_defaults(func=_run("snapshot3d.viewer.commands", "decode_command"))
 

@@ -20,15 +20,18 @@ def unit_grid(res: int) -> np.ndarray:
     return np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)
 
 
-def density_to_mesh(density: np.ndarray, level: float, box: np.ndarray, colour_fn) -> trimesh.Trimesh:
-    """density (G, G, G) on `unit_grid(G)`; level: the iso-density; box (2, 3) world box;
-    colour_fn(points (M, 3) in [-1, 1]) -> RGB (M, 3) in [0, 1]. Returns a world-space mesh."""
+def density_to_mesh(density: np.ndarray, level: float, box: np.ndarray, colour_fn,
+                    cell_centred: bool = False) -> trimesh.Trimesh:
+    """density (G, G, G) on `unit_grid(G)` (or, `cell_centred`, at the centres of G^3 cells over the
+    box); level: the iso-density; box (2, 3) world box; colour_fn(points (M, 3) in [-1, 1]) -> RGB
+    (M, 3) in [0, 1]. Returns a world-space mesh."""
     g = density.shape[0]
     if not (density.max() > level > density.min()):
         raise UserError("the field has no surface at the mesh level (is the scene empty?)")
     padded = np.pad(density, 1, constant_values=0.0)  # closes surfaces that touch the box
     verts, faces, _, _ = marching_cubes(padded, level=level)
-    unit = np.clip((verts - 1.0) / (g - 1) * 2.0 - 1.0, -1, 1).astype(np.float32)
+    unit = (verts - 0.5) / g if cell_centred else (verts - 1.0) / (g - 1)
+    unit = np.clip(unit * 2.0 - 1.0, -1, 1).astype(np.float32)
     rgb = np.clip(colour_fn(unit), 0, 1)
     world = box[0] + (unit + 1.0) * 0.5 * (box[1] - box[0])
     colours = np.concatenate([(rgb * 255).round(), np.full((len(rgb), 1), 255)], 1).astype(np.uint8)

@@ -1,5 +1,5 @@
 """Where the package's shipped files live (torch-free): `snapshot3d/assets/` holds the decoder and
-codec weights, the two ONNX models, the default scene and the demo's example photo."""
+codec weights, the three ONNX models, the default scene and the demo's example photo."""
 from __future__ import annotations
 
 from importlib import resources
@@ -17,5 +17,6 @@ def asset(name: str = "") -> Path:
 
 
 def model_file(kind: str) -> str:
-    """File name of an exported model: kind 'restore' (names the codec) or 'shade' (names the decoder)."""
-    return {"restore": f"restore-{formats.CODEC_VERSION}.onnx", "shade": f"shade-{formats.DECODER_VERSION}.onnx"}[kind]
+    """File name of an exported model: kind 'restore' (names the codec), 'project' or 'field' (name the decoder)."""
+    return {"restore": f"restore-{formats.CODEC_VERSION}.onnx", "project": f"project-{formats.DECODER_VERSION}.onnx",
+            "field": f"field-{formats.DECODER_VERSION}.onnx"}[kind]

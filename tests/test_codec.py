@@ -82,3 +82,13 @@ def test_round_8bit_straight_through():
     assert torch.allclose(y, torch.tensor([31 / 255, 1.0, 1.0, 0.0]))
     y.sum().backward()
     assert torch.all(x.grad == 1)
+
+
+def test_fine_tune_refuses_another_architecture(tmp_path):
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.codec import codec_path
+    from snapshot3d.train.codec_train import train_codec
+    from snapshot3d.train.config import CodecConfig
+    with pytest.raises(UserError, match="another architecture"):
+        train_codec(CodecConfig(blocks=2, init=str(codec_path())), None, tmp_path / "x.npz")
+    assert not (tmp_path / "x.npz").exists()

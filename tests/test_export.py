@@ -1,45 +1,62 @@
-"""ONNX export of both models: checker-clean, pinned names and metadata, and parity with torch on
-real inputs (an export failure fails here; it is never skipped)."""
+"""ONNX export of the models: checker-clean, pinned names and metadata, and parity with torch on
+real inputs (an export failure fails here; it is never skipped); the grid graphs against the
+reference field maths."""
 import numpy as np
 import onnx
 import onnxruntime as ort
 import torch
 
 from snapshot3d import formats
-from snapshot3d.export.models import ShadeGraph
-from snapshot3d.export.onnx_export import OPSET, export_restore, export_shade
-from snapshot3d.export.parity import restore_parity, shade_parity
+from snapshot3d.export.onnx_export import OPSET, export_field, export_project, export_restore
+from snapshot3d.export.parity import field_parity, restore_parity, torch_field_models
 from snapshot3d.train.codec import load_codec
 from snapshot3d.train.decoder import load_decoder
+from snapshot3d.train.field import decode, sample_planes
+from snapshot3d.viewer.bake import cell_coords, grid_field
+from snapshot3d.viewer.runtime import FieldModels
 
 
-def test_shade_graph_parity_random_inputs(tmp_path):
-    path = tmp_path / "shade.onnx"
-    export_shade(load_decoder(), path)
-    model = onnx.load(str(path))
-    meta = {p.key: p.value for p in model.metadata_props}
-    assert meta["decoder_version"] == formats.DECODER_VERSION and meta["opset"] == str(OPSET)
-    assert [i.name for i in model.graph.input] == ["planes", "points", "delta"]
-    assert [o.name for o in model.graph.output] == ["rgb", "acc"]
+def _export_field_models(tmp_path):
+    dec = load_decoder()
+    export_project(dec, tmp_path / "project.onnx")
+    export_field(dec, tmp_path / "field.onnx")
+    return tmp_path / "project.onnx", tmp_path / "field.onnx"
+
+
+def test_grid_field_graphs_match_the_reference_field(tmp_path):
+    """project + field (ORT, and their torch graphs) at grid cells == sample_planes + decode at the
+    cells' centres, for another R and grid size than exported with."""
+    project, field = _export_field_models(tmp_path)
+    for path, names_in, names_out in ((project, ["planes", "interp"], ["tables"]),
+                                      (field, ["tables", "rows"], ["density_logit", "rgb"])):
+        model = onnx.load(str(path))
+        meta = {p.key: p.value for p in model.metadata_props}
+        assert meta["decoder_version"] == formats.DECODER_VERSION and meta["opset"] == str(OPSET)
+        assert [i.name for i in model.graph.input] == names_in and [o.name for o in model.graph.output] == names_out
     rng = np.random.default_rng(0)
-    planes = rng.uniform(-1, 1, (3, formats.C_MAX, 40, 40)).astype(np.float32)  # another R than exported with
-    pts = rng.uniform(-1, 1, (300, 7, 3)).astype(np.float32)
-    delta = rng.uniform(0, 0.05, (300, 7)).astype(np.float32)
-    rgb, acc = ort.InferenceSession(str(path)).run(None, {"planes": planes, "points": pts, "delta": delta})
+    planes = rng.uniform(-1, 1, (3, formats.C_MAX, 40, 40)).astype(np.float32)
+    res = 24
+    cells = rng.integers(0, res, (500, 3))
+    c = cell_coords(res)
     with torch.no_grad():
-        trgb, tacc = ShadeGraph(load_decoder())(*(torch.from_numpy(a) for a in (planes, pts, delta)))
-    assert np.abs(rgb - trgb.numpy()).max() < 1e-4 and np.abs(acc - tacc.numpy()).max() < 1e-4
+        sigma, rgb = decode(sample_planes(torch.from_numpy(planes), torch.from_numpy(c[cells])), load_decoder())
+    want = torch.log(sigma).numpy(), rgb.numpy()
+    for models in (FieldModels(ort.InferenceSession(str(project)), ort.InferenceSession(str(field))),
+                   torch_field_models()):
+        logit, got_rgb = grid_field(models, planes, res, cells)
+        assert np.abs(np.minimum(logit, formats.DENSITY_CLAMP) - want[0]).max() < 1e-4
+        assert np.abs(got_rgb - want[1]).max() < 1e-4
 
 
 def test_exported_models_match_torch_on_real_inputs(tmp_path):
-    restore, shade = tmp_path / "restore.onnx", tmp_path / "shade.onnx"
+    restore = tmp_path / "restore.onnx"
     size = export_restore(load_codec()[0], restore)
-    export_shade(load_decoder(), shade)
+    project, field = _export_field_models(tmp_path)
     assert size < 5e6
     meta = {p.key: p.value for p in onnx.load(str(restore)).metadata_props}
     assert meta["codec_id"] == formats.CODEC_ID and meta["orbit_views"] == str(formats.ORBIT_VIEWS)
-    assert shade_parity(shade)["views_max_abs_diff"] <= 1e-3
-    r = restore_parity(restore, shade)
+    assert field_parity(project, field)["views_max_abs_diff"] <= 1e-3
+    r = restore_parity(restore, project, field)
     assert r["restore_psnr_diff_db"] <= 0.05 and r["restore_psnr_onnx"] > 20, r
 
 
@@ -51,10 +68,11 @@ def test_shipped_models_are_current(tmp_path):
     a = ort.InferenceSession(str(model_path("restore"))).run(None, {"snapshot": x})[0]
     b = ort.InferenceSession(str(tmp_path / "r.onnx")).run(None, {"snapshot": x})[0]
     assert np.abs(a - b).max() < 1e-4
-    export_shade(load_decoder(), tmp_path / "s.onnx")
+    project, field = _export_field_models(tmp_path)
     rng = np.random.default_rng(2)
-    feeds = {"planes": rng.uniform(-1, 1, (3, formats.C_MAX, 32, 32)).astype(np.float32),
-             "points": rng.uniform(-1, 1, (64, 5, 3)).astype(np.float32), "delta": np.full((64, 5), 0.03, np.float32)}
-    for shipped, fresh in zip(ort.InferenceSession(str(model_path("shade"))).run(None, feeds),
-                              ort.InferenceSession(str(tmp_path / "s.onnx")).run(None, feeds)):
-        assert np.abs(shipped - fresh).max() < 1e-4
+    planes = rng.uniform(-1, 1, (3, formats.C_MAX, 32, 32)).astype(np.float32)
+    cells = rng.integers(0, 16, (64, 3))
+    shipped = FieldModels(ort.InferenceSession(str(model_path("project"))), ort.InferenceSession(str(model_path("field"))))
+    fresh = FieldModels(ort.InferenceSession(str(project)), ort.InferenceSession(str(field)))
+    for x, y in zip(grid_field(shipped, planes, 16, cells), grid_field(fresh, planes, 16, cells)):
+        assert np.abs(x - y).max() < 1e-4

@@ -56,6 +56,14 @@ def test_lossless_round_trip(sheet, snapshot):
     assert tuple(res.report()) == REPORT_KEYS and res.confidence > 0.9
 
 
+def test_pilot_psnr_falls_with_the_channel(sheet):
+    """The markers as a pilot: near perfect through a lossless capture, much worse through a severe one."""
+    clean = scan_image(_photo(sheet, "none", 0)[0]).pilot_psnr
+    jpeg = scan_image(_photo(sheet, "jpeg75", 0)[0]).pilot_psnr
+    severe = np.median([scan_image(_photo(sheet, "severe", s)[0]).pilot_psnr for s in range(3)])
+    assert clean > 45 and clean >= jpeg - 0.5 and jpeg > severe + 15, (clean, jpeg, severe)
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_mild_corners_subpixel(sheet, snapshot, seed):
     img, truth = _photo(sheet, "mild", seed)

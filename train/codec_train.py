@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,7 @@ from snapshot3d import codec_layout, formats
 from snapshot3d.errors import UserError
 
 from .channel import ChannelRanges, apply_channel, curriculum_level, round_8bit
-from .codec import build_codec, save_codec
+from .codec import build_codec, load_codec, save_codec
 from .codec_data import CodecData, crop_batch, full_sample
 from .codec_net import haar
 from .commands import orbit_cameras
@@ -90,6 +90,14 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
     """Train (or resume) and write the weights to `out`; returns the run's summary."""
     torch.manual_seed(cfg.seed)
     net = build_codec(cfg)
+    ranges = replace(ranges, jpeg_prob=cfg.jpeg_prob)
+    if cfg.init:
+        start, start_cfg = load_codec(Path(cfg.init))
+        arch = ("levels", "blocks", "width", "layers", "clamp")
+        if any(getattr(start_cfg, k) != getattr(cfg, k) for k in arch):
+            raise UserError(f"--init {cfg.init} has another architecture ({', '.join(arch)} must match)")
+        net.load_state_dict(start.state_dict())
+        net.requires_grad_(True)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     gen = torch.Generator().manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)

@@ -73,6 +73,8 @@ class CodecConfig:
     plane_weight: float = _f(1.0, "weight of the plane loss (unspread secret vs planes)")
     channel: bool = _f(True, "train through the print-and-capture channel (off: the paper's digital setting, 8-bit only)")
     ramp: float = _f(0.5, "fraction of the run over which the channel level rises from 0 to its maximum")
+    jpeg_prob: float = _f(0.6, "probability that a training image goes through JPEG (after the other distortions)")
+    init: str = _f("", "codec weights to start from (a fine-tune with the same architecture); empty: random")
     holdout_scenes: str = _f("spot", "comma-separated scenes never trained on (evaluation)")
     holdout_hosts: str = _f("coffee,chelsea", "comma-separated host photos never trained on (evaluation)")
     seed: int = _f(0, "random seed")

@@ -17,20 +17,17 @@ from snapshot3d.images import contact_sheet, write_gif, write_png, write_views
 __all__ = ["decode_command", "write_outputs", "decoded_mesh"]
 
 
-def decoded_mesh(sess, planes: np.ndarray, box, res: int = 96):
-    """Vertex-coloured trimesh of the decoded field (marching cubes where one step is half opaque)."""
-    from snapshot3d.meshing import density_to_mesh, unit_grid
+def decoded_mesh(baked, box):
+    """Vertex-coloured trimesh of a baked field (marching cubes where one reference step is half
+    opaque; colours read from the bake)."""
+    from snapshot3d.meshing import density_to_mesh
 
+    from .bake import sample_points
     from .march import Frame
-    from .render import pad_planes, point_alpha
 
-    p12, step = pad_planes(planes), Frame.from_box(box).step
-    _, sigma = point_alpha(sess, p12, unit_grid(res), step)
-
-    def colours(unit):
-        return sess.run(None, {"planes": p12, "points": unit.reshape(-1, 1, 3).astype(np.float32),
-                               "delta": np.full((len(unit), 1), 1e3, np.float32)})[0]
-    return density_to_mesh(sigma.reshape(res, res, res), float(np.log(2.0) / step), np.asarray(box), colours)
+    step = Frame.from_box(box).step
+    return density_to_mesh(np.exp(baked.grid[..., 0]), float(np.log(2.0) / step), np.asarray(box),
+                           lambda unit: sample_points(baked, unit)[1], cell_centred=True)
 
 
 def write_outputs(folder: Path, views: np.ndarray, report: dict, mesh=None) -> None:
@@ -59,18 +56,17 @@ def _publish(tmp: Path, out: Path) -> None:
 def decode_command(args) -> int:
     from .decode import decode_photo
     from .render import RenderConfig
-    from .runtime import model_path, session
 
     if not 1 <= args.views <= 360 or not 16 <= args.size <= 2048:
         raise UserError("--views must be in 1..360 and --size in 16..2048")
-    if args.samples < 1:
+    if args.samples is not None and args.samples < 1:
         raise UserError("--samples must be >= 1")
     out = Path(args.output)
-    dec = decode_photo(args.photo, args.views, args.size, RenderConfig(samples=args.samples))
+    dec = decode_photo(args.photo, args.views, args.size, RenderConfig(**({"samples": args.samples} if args.samples else {})))
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
     try:
-        mesh = decoded_mesh(session(str(model_path("shade"))), dec.scene.planes(), dec.scene.box) if args.mesh else None
+        mesh = decoded_mesh(dec.baked, dec.scene.box) if args.mesh else None
         write_outputs(tmp, dec.views, dec.report, mesh)
         from snapshot3d.scene import save_scene
         save_scene(dec.scene, tmp / "scene.s3d")

@@ -2,14 +2,10 @@
 
 `decode_photo` returns the views (N, size, size, 3) float32 RGB in [0, 1], the restored scene and a
 report with `detected`, `confidence`, `timings_ms` per stage, `decode_ms` (photo file to all views in
-memory) and a quality estimate that needs no ground truth: the channel noise measured in the part of
-the restored secret that carries no signal (`codec_layout.noise_estimate`), as plane-value RMS and as
-the PSNR of the planes it implies. Caveat, measured by `bench decode`: the learned codec's errors lie
-mostly inside the signal span, so this estimate does not yet track `restore_psnr` (a pilot signal
-needs a codec trained with reserved channels)."""
+memory) and a quality estimate that needs no ground truth (`viewer.quality`: the sheet's markers as a
+pilot signal, and the `restore_psnr` they predict)."""
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -20,9 +16,11 @@ from snapshot3d.cameras import orbit_cameras
 from snapshot3d.errors import UserError
 from snapshot3d.scene import Orbit, Scene, dequantize_planes, quantize_planes
 
-from .render import RenderConfig, density_grid, pad_planes, render_views
+from .bake import Baked, bake_field
+from .render import RenderConfig, pad_planes, render_views
 from .march import Frame
-from .runtime import model_path, session
+from .quality import quality_estimate
+from .runtime import field_models, model_path, session
 
 __all__ = ["Decoded", "decode_photo", "restore_planes", "scene_from_meta"]
 
@@ -32,7 +30,7 @@ class Decoded:
     views: np.ndarray
     scene: Scene
     report: dict
-    grids: tuple
+    baked: Baked
 
 
 def restore_planes(snapshot: np.ndarray, res: int, channels: int, strength: float = 1.0):
@@ -78,8 +76,8 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
     planes, secret = restore_planes(res.snapshot, *meta.planes, meta.strength or 1.0)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
-    grids = density_grid(session(str(model_path("shade"))), pad_planes(planes), Frame.from_box(scene.box), cfg.occ_res)
-    sess = session(str(model_path("shade")), 1 if cfg.n_workers() > 1 else None)
+    models = field_models()
+    baked = bake_field(models, pad_planes(planes), Frame.from_box(scene.box), cfg.bake)
     t3 = time.perf_counter()
     c2w, intr = orbit_cameras(scene.orbit, views, size)
     first = []
@@ -89,18 +87,17 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
             first.append(time.perf_counter())
         if on_view is not None:
             on_view(i)
-    out = render_views(sess, planes, scene.box, c2w, intr, size, size, cfg, grids=grids, on_view=_tick)
+    out = render_views(models, planes, scene.box, c2w, intr, size, size, cfg, baked=baked, on_view=_tick)
     t4 = time.perf_counter()
-    noise = codec_layout.noise_estimate(secret, *meta.planes)
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
     report = {
         "detected": True, "confidence": round(float(res.confidence), 3),
-        "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "occupancy": ms(t2, t3), "render": ms(t3, t4),
+        "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3), "render": ms(t3, t4),
                        "first_view": ms(t0, first[0]) if first else None},
         "decode_ms": ms(t0, t4),
-        "quality_estimate": {"plane_noise_rms": round(noise, 5),
-                             "plane_psnr_db": round(20 * math.log10(2.0 / max(noise, 1e-6)), 2)},
+        "quality_estimate": quality_estimate(res.pilot_psnr),
         "planes": list(meta.planes), "views": views, "size": size, "render": cfg.__dict__,
+        "field_evaluations": baked.evaluated,
         "scan": {k: v for k, v in res.report().items() if k in ("corners", "reprojection_px", "qr")},
     }
-    return Decoded(out, scene, report, grids)
+    return Decoded(out, scene, report, baked)

@@ -1,23 +1,23 @@
 """Where the renderer's samples go (numpy): rays of a camera in the scene box's frame, ray-box
 clipping, and for each pixel the interval where its ray becomes opaque, found on a low-resolution
-probe image marched through a density grid (no network call); a few samples spread over that
-interval are all the network shades.
+probe image marched through a density grid; a few samples spread over that interval are all the
+renderer reads.
 
 Frames: world -> q = (world - centre) / scale (scale = largest half-extent) -> unit = q / half_unit in
-[-1, 1]^3, the planes' coordinates. Occupancy grids are (G, G, G) bool indexed [ix, iy, iz] over unit
-coordinates (as in `train.occupancy`). The sample spacing is the reference renderer's: the box
-diagonal (q space) over `formats.RENDER_STEPS_PER_BOX`."""
+[-1, 1]^3, the planes' coordinates. Grids are (G, G, G) indexed [ix, iy, iz] over unit coordinates,
+values at cell centres. `Frame.step` is the reference renderer's sample spacing: the box diagonal
+(q space) over `formats.RENDER_STEPS_PER_BOX`."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
-import cv2
 import numpy as np
 
 from snapshot3d import formats
 from snapshot3d.cameras import pixel_rays
 
-__all__ = ["Frame", "ray_box", "view_rays", "probe_window", "window_samples"]
+__all__ = ["Frame", "ray_box", "view_rays", "ray_cells", "probe_window", "clip_window"]
 
 
 @dataclass(frozen=True)
@@ -45,41 +45,64 @@ def ray_box(o: np.ndarray, d: np.ndarray, half: np.ndarray):
     return np.maximum(np.minimum(t0, t1).max(1), 0.0), np.maximum(t0, t1).min(1)
 
 
+@lru_cache(maxsize=8)
+def _camera_dirs(fx: float, fy: float, cx: float, cy: float, width: int, height: int) -> np.ndarray:
+    """unit ray directions (H*W, 3) in camera axes (`cameras.pixel_rays` with the identity pose)."""
+    return pixel_rays(np.eye(4), fx, fy, cx, cy, width, height)[1]
+
+
 def view_rays(c2w: np.ndarray, intr: np.ndarray, width: int, height: int, frame: Frame):
-    """q-space rays (H*W, 3) float32 of one OpenGL camera, row-major."""
-    o, d = pixel_rays(np.asarray(c2w, np.float64), *[float(x) for x in intr], width, height)
-    return ((o - frame.centre) / frame.scale).astype(np.float32), d
+    """q-space rays of one OpenGL camera: its centre (1, 3) (every ray's origin) and unit directions
+    (H*W, 3) float32, row-major."""
+    c2w = np.asarray(c2w, np.float64)
+    d = _camera_dirs(*[float(x) for x in intr], width, height) @ c2w[:3, :3].T.astype(np.float32)
+    return ((c2w[:3, 3] - frame.centre) / frame.scale).astype(np.float32).reshape(1, 3), d
 
 
-def _lookup(occ: np.ndarray, unit: np.ndarray) -> np.ndarray:
-    g = occ.shape[0]
-    cell = np.clip(((unit + 1.0) * 0.5 * g).astype(np.int32), 0, g - 1)
-    return occ[cell[..., 0], cell[..., 1], cell[..., 2]]
+def ray_cells(o: np.ndarray, d: np.ndarray, frame: Frame, res: int):
+    """q-space rays (origins (N or 1, 3), directions (N, 3)) -> a, b (same shapes) float32 such that
+    a + t b are the cell coordinates of the ray's point at t in a res^3 grid over the unit box (cell
+    i's centre at coordinate i)."""
+    s = 0.5 * res / frame.half_unit
+    return (o * s + (0.5 * res - 0.5)).astype(np.float32), (d * s).astype(np.float32)
 
 
-def _march_density(o, d, frame: Frame, sigma: np.ndarray, t_lo: float, t_hi: float):
+def _nearest(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """grid (G, G, G) read at the nearest cells of cell coordinates (..., 3)."""
+    g = grid.shape[0]
+    c = np.clip(np.rint(cells), 0, g - 1).astype(np.int32)
+    return grid.reshape(-1)[(c[..., 0] * g + c[..., 1]) * g + c[..., 2]]
+
+
+def _march_density(o, d, frame: Frame, sigma: np.ndarray, t_lo: float, t_hi: float, chunk: int = 1024):
     """Transmittance-based interval of each q-space ray through the density grid (nearest cell):
     t where the transmittance first falls below `t_lo`'s complement (entry) and below `t_hi` (exit);
-    entry is inf where the ray never gets dense."""
+    entry is inf where the ray never gets dense. o (1, 3) is the camera centre, d (N, 3); rays go
+    `chunk` at a time (cache-sized arrays)."""
+    if len(d) > chunk:
+        parts = [_march_density(o, d[i:i + chunk], frame, sigma, t_lo, t_hi, chunk)
+                 for i in range(0, len(d), chunk)]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     near, far = ray_box(o, d, frame.half_unit)
     step = 2.0 * frame.step  # about one grid cell: the grid is read by nearest cell anyway
     n = int(np.ceil(max(float((far - near).max(initial=0.0)), 0.0) / step)) + 1
-    t = near[:, None] + (np.arange(n, dtype=np.float32)[None] + 0.5) * step
-    tau = _lookup(sigma, (o[:, None] + t[..., None] * d[:, None]) / frame.half_unit) * step
-    tau = np.where(t < far[:, None], tau, 0.0)
-    trans = np.exp(-np.cumsum(tau, axis=1))
-    dense = trans < 1.0 - t_lo
-    entry = np.where(dense.any(1), t[np.arange(len(t)), dense.argmax(1)] - step, np.inf)
-    opaque = trans < t_hi
-    exit_ = np.where(opaque.any(1), t[np.arange(len(t)), opaque.argmax(1)] + step, far)
+    t = near[:, None] + (np.arange(n, dtype=np.float32)[None] + 0.5) * np.float32(step)
+    a, b = ray_cells(o, d, frame, sigma.shape[0])
+    tau = _nearest(sigma, a[:, None] + t[..., None] * b[:, None]) * np.float32(step)
+    tau[t >= far[:, None]] = 0.0
+    optical = np.cumsum(tau, axis=1)  # compared with -log of the transmittance thresholds
+    dense, opaque = optical > -np.log1p(-t_lo), optical > -np.log(t_hi)
+    rows = np.arange(len(d))
+    entry = np.where(dense.any(1), t[rows, dense.argmax(1)] - step, np.inf)
+    exit_ = np.where(opaque.any(1), t[rows, opaque.argmax(1)] + step, far)
     return entry, exit_
 
 
 def probe_window(c2w, intr, width: int, height: int, frame: Frame, sigma: np.ndarray, div: int,
                  margin: float) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) interval [lo, hi] of each pixel's ray worth sampling, from a probe image `div` times
-    smaller marched through the density grid: the union over a 3x3 neighbourhood of probe pixels,
-    widened by `margin` (q units); lo is inf where nothing is dense nearby."""
+    smaller marched through the density grid: the union over the 2x2 probe pixels whose centres
+    surround the pixel's centre, widened by `margin` (q units); lo is inf where nothing is dense nearby."""
     pw, ph = -(-width // div), -(-height // div)
     scale = np.array([pw / width, ph / height, pw / width, ph / height])
     o, d = view_rays(c2w, np.asarray(intr) * scale, pw, ph, frame)
@@ -87,20 +110,23 @@ def probe_window(c2w, intr, width: int, height: int, frame: Frame, sigma: np.nda
     hit = np.isfinite(entry)
     lo = np.where(hit, entry, 1e9).reshape(ph, pw).astype(np.float32)
     hi = np.where(hit, exit_, -1e9).reshape(ph, pw).astype(np.float32)
-    k = np.ones((3, 3), np.uint8)
-    lo, hi = cv2.erode(lo, k) - margin, cv2.dilate(hi, k) + margin
-    lo = np.repeat(np.repeat(lo, div, 0), div, 1)[:height, :width]
-    hi = np.repeat(np.repeat(hi, div, 0), div, 1)[:height, :width]
+    lo, hi = _pairs(np.pad(lo, 1, mode="edge"), np.minimum) - margin, _pairs(np.pad(hi, 1, mode="edge"), np.maximum) + margin
+    iy, ix = (_surrounding(n, div) for n in (height, width))  # pixel -> its 2x2 block's (bottom, right) probe
+    lo, hi = lo[iy[:, None], ix[None]], hi[iy[:, None], ix[None]]
     return np.where(lo >= 1e8, np.inf, lo), hi
 
 
-def window_samples(o, d, lo, hi, frame: Frame, occ: np.ndarray, samples: int):
-    """points (N, S, 3) in unit coordinates and lengths delta (N, S): S midpoint samples spread over
-    [lo, hi] (clipped to the box), dropped (delta 0) in empty cells."""
+def _pairs(a: np.ndarray, op) -> np.ndarray:
+    """(h + 1, w + 1) over every 2x2 block of a (h + 2, w + 2) image: out[i, j] = op of a[i:i+2, j:j+2]."""
+    return op(op(a[:-1, :-1], a[1:, :-1]), op(a[:-1, 1:], a[1:, 1:]))
+
+
+def _surrounding(n: int, div: int) -> np.ndarray:
+    """for each of n full-resolution pixels, the index into `_pairs` of the two probe pixels around it"""
+    return ((np.arange(n) + 0.5) / div + 0.5).astype(np.int64)
+
+
+def clip_window(o, d, lo, hi, frame: Frame):
+    """[lo, hi] (N,) intersected with each ray's span inside the box."""
     near, far = ray_box(o, d, frame.half_unit)
-    lo, hi = np.maximum(lo, near), np.minimum(hi, far)
-    width = np.maximum(hi - lo, 0.0) / samples
-    t = lo[:, None] + (np.arange(samples, dtype=np.float32)[None] + 0.5) * width[:, None]
-    unit = (o[:, None] + t[..., None] * d[:, None]) / frame.half_unit
-    keep = _lookup(occ, unit)
-    return np.clip(unit, -1, 1).astype(np.float32), np.where(keep, width[:, None], 0.0).astype(np.float32)
+    return np.maximum(lo, near), np.minimum(hi, far)

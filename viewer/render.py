@@ -1,6 +1,7 @@
-"""The fast renderer (numpy + the ONNX shading graph): an occupancy grid computed once from the
-planes, then for each view a low-resolution probe for where density starts, a short window of
-samples per pixel from there, shaded and composited by onnxruntime in bounded chunks.
+"""The fast renderer (numpy + OpenCV + the ONNX field graphs): the field baked into a grid once per
+decode (`viewer.bake`), then for each view a low-resolution probe for where density starts and a
+window of samples per pixel from there, read from the baked grid by trilinear interpolation and
+composited in numpy in cache-sized chunks. The network never runs per sample.
 
 planes: (3, C, R, R) float32 in [-1, 1]; cameras: c2w (N, 4, 4) OpenGL, intrinsics (N, 4) fx fy cx cy;
 views: (N, H, W, 3) float32 RGB in [0, 1] over white."""
@@ -14,26 +15,27 @@ import numpy as np
 
 from snapshot3d import formats
 
-from .march import Frame, probe_window, view_rays, window_samples
+from .bake import Baked, bake_field, sample_baked
+from .march import Frame, clip_window, probe_window, ray_cells, view_rays
 
-__all__ = ["RenderConfig", "pad_planes", "point_alpha", "density_grid", "render_views"]
+__all__ = ["RenderConfig", "pad_planes", "composite", "render_views"]
 
 
 @dataclass(frozen=True)
 class RenderConfig:
     """Speed/accuracy settings of the fast renderer (charted by `snapshot3d bench decode`)."""
 
-    samples: int = 12
+    samples: int = 16
     """samples per pixel, spread over the interval where its ray turns opaque"""
-    occ_res: int = formats.OCC_RES
-    """occupancy grid cells per axis"""
+    bake: int = 96
+    """cells per axis of the baked field (a multiple of 8)"""
     probe_div: int = 4
     """the first-hit probe image is this many times smaller than the view"""
     chunk: int = 2048
-    """rays per onnxruntime call (bounds memory; small chunks stay in cache and run faster)"""
+    """rays per batch (bounds memory; batches that stay in cache run fastest)"""
     workers: int = 0
-    """views rendered at once, each by a one-thread session (0: one per core); onnxruntime and most
-    numpy work release the GIL, and this beats one view at a time on a multi-threaded session"""
+    """views rendered at once, one thread each (0: one per core); OpenCV and most numpy work release
+    the GIL"""
 
     def n_workers(self) -> int:
         return self.workers or os.cpu_count() or 1
@@ -46,65 +48,57 @@ def pad_planes(planes: np.ndarray) -> np.ndarray:
     return out
 
 
-def _shade(sess, planes12, pts, delta):
-    rgb, acc = sess.run(None, {"planes": planes12, "points": pts, "delta": delta})
-    return rgb, acc
+def _tau(logit: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    return np.exp(np.minimum(logit, formats.DENSITY_CLAMP)) * delta
 
 
-def point_alpha(sess, planes12: np.ndarray, points: np.ndarray, step: float, chunk: int = 1 << 16):
-    """alpha (M,) of one step of length `step` at points (M, 3) in unit coordinates, and the density
-    (M,) it implies (sigma = -log(1 - alpha) / step)."""
-    pts = points.reshape(-1, 1, 3).astype(np.float32)
-    alpha = np.concatenate([_shade(sess, planes12, p, np.full((len(p), 1), step, np.float32))[1]
-                            for p in np.array_split(pts, max(1, len(pts) // chunk))])
-    return alpha, (-np.log1p(-np.minimum(alpha, 1 - 1e-6)) / step).astype(np.float32)
+def composite(logit: np.ndarray, rgb: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Volume rendering (DESIGN 1.1) of (N, S) density logits and (N, S, 3) colours with lengths delta
+    (N, S) or (N, 1) -> (N, 3) over the white background. Weight i is T_i - T_{i+1} (transmittance
+    before and after sample i), which is T_i (1 - exp(-tau_i))."""
+    after = np.exp(-np.cumsum(_tau(logit, delta), axis=1))
+    w = -np.diff(after, axis=1, prepend=np.float32(1.0))
+    return np.einsum("ns,nsc->nc", w, rgb) + after[:, -1:] * formats.BACKGROUND
 
 
-def density_grid(sess, planes12: np.ndarray, frame: Frame, res: int):
-    """Density at the cell centres (res, res, res) float32 and the occupancy (bool, cells whose
-    one-step alpha exceeds the threshold, dilated by one cell)."""
-    c = (np.arange(res, dtype=np.float32) + 0.5) / res * 2 - 1
-    alpha, sigma = point_alpha(sess, planes12, np.stack(np.meshgrid(c, c, c, indexing="ij"), -1), frame.step)
-    sigma = sigma.reshape(res, res, res)
-    occ = (alpha > formats.OCC_ALPHA_THRESHOLD).reshape(res, res, res)
-    for ax in range(3):  # separable max filter = 3x3x3 dilation
-        occ = occ | np.roll(occ, 1, ax) & _edge(res, ax, 1) | np.roll(occ, -1, ax) & _edge(res, ax, -1)
-    return sigma, occ
+def _baked_colour(baked: Baked, o, d, lo, hi, frame: Frame, samples: int) -> np.ndarray:
+    """(N, 3) colours of rays from o (1, 3) along d (N, 3), from `samples` reads spread over their
+    windows [lo, hi] (N,)."""
+    lo, hi = clip_window(o, d, lo, hi, frame)
+    width = np.maximum(hi - lo, 0.0) / samples
+    t = lo[:, None] + (np.arange(samples, dtype=np.float32)[None] + 0.5) * width[:, None]
+    a, b = ray_cells(o, d, frame, baked.res)
+    logit, rgb = sample_baked(baked, *(a[:, k:k + 1] + t * b[:, k:k + 1] for k in range(3)))
+    return composite(logit, rgb, width[:, None])
 
 
-def _edge(res: int, ax: int, shift: int) -> np.ndarray:
-    m = np.ones(res, bool)
-    m[0 if shift > 0 else -1] = False  # no wrap-around
-    shape = [1, 1, 1]
-    shape[ax] = res
-    return m.reshape(shape)
-
-
-def render_views(sess, planes: np.ndarray, box, c2w: np.ndarray, intr: np.ndarray, width: int, height: int,
-                 cfg: RenderConfig = RenderConfig(), grids=None, on_view=None) -> np.ndarray:
-    """`grids`: (sigma, occ) from `density_grid`, computed here when not given (once per decode)."""
-    planes12 = pad_planes(planes)
+def render_views(models, planes: np.ndarray, box, c2w: np.ndarray, intr: np.ndarray, width: int, height: int,
+                 cfg: RenderConfig = RenderConfig(), baked: Baked | None = None, on_view=None) -> np.ndarray:
+    """`models`: `runtime.FieldModels`; `baked` from `bake_field`, computed here when not given (once
+    per decode). The first view is split over the workers; the rest go `workers` at a time."""
     frame = Frame.from_box(box)
-    sigma, occ = grids if grids is not None else density_grid(sess, planes12, frame, cfg.occ_res)
-    margin = 2.0 * float(frame.half_unit.mean()) / cfg.occ_res
+    baked = baked if baked is not None else bake_field(models, pad_planes(planes), frame, cfg.bake)
+    margin = 2.0 * float(frame.half_unit.mean()) / baked.sigma.shape[0]
     out = np.full((len(c2w), height * width, 3), formats.BACKGROUND, np.float32)
 
-    def one(i):
+    def shade(i, o, d, lo, hi, idx):
+        out[i, idx] = _baked_colour(baked, o, d[idx], lo[idx], hi[idx], frame, cfg.samples)
+
+    def view(i, pool=None):
         o, d = view_rays(c2w[i], intr[i], width, height, frame)
-        lo, hi = probe_window(c2w[i], intr[i], width, height, frame, sigma, cfg.probe_div, margin)
+        lo, hi = probe_window(c2w[i], intr[i], width, height, frame, baked.sigma, cfg.probe_div, margin)
         lo, hi = lo.reshape(-1), hi.reshape(-1)
         hit = np.flatnonzero(np.isfinite(lo))
-        for j in range(0, len(hit), cfg.chunk):
-            idx = hit[j:j + cfg.chunk]
-            pts, delta = window_samples(o[idx], d[idx], lo[idx], hi[idx], frame, occ, cfg.samples)
-            out[i, idx] = _shade(sess, planes12, pts, delta)[0]
+        chunks = [hit[j:j + cfg.chunk] for j in range(0, len(hit), cfg.chunk)]
+        list((pool.map if pool is not None else map)(lambda idx: shade(i, o, d, lo, hi, idx), chunks))
         if on_view is not None:
             on_view(i)
 
-    if cfg.n_workers() > 1 and len(c2w) > 1:
+    if cfg.n_workers() > 1 and len(c2w) > 0:
         with ThreadPoolExecutor(cfg.n_workers()) as pool:
-            list(pool.map(one, range(len(c2w))))
+            view(0, pool)  # the first view's chunks on all workers: it shows as early as possible
+            list(pool.map(view, range(1, len(c2w))))
     else:
         for i in range(len(c2w)):
-            one(i)
+            view(i)
     return np.clip(out.reshape(len(c2w), height, width, 3), 0, 1)

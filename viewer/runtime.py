@@ -1,22 +1,36 @@
-"""onnxruntime sessions for the two shipped models (numpy and onnxruntime only; never torch).
+"""onnxruntime sessions for the shipped models (numpy and onnxruntime only; never torch).
 
 Session options are tuned for a phone-class CPU: all graph optimisations, one intra-op thread per
 core, sequential execution, memory-pattern reuse (the shapes repeat chunk after chunk)."""
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
 from snapshot3d.errors import UserError
 from snapshot3d.paths import asset, model_file
 
-__all__ = ["model_path", "session", "model_metadata"]
+__all__ = ["FieldModels", "field_models", "model_path", "session", "model_metadata"]
+
+
+@dataclass(frozen=True)
+class FieldModels:
+    """The renderer's two graphs (onnxruntime sessions, or anything with their `run`): `project`
+    (planes, interp -> tables) and `field` (tables, rows -> density_logit, rgb); see `export.models`."""
+
+    project: object
+    field: object
 
 
 def model_path(kind: str) -> Path:
-    """kind 'restore' or 'shade' -> the packaged model file."""
+    """kind 'restore', 'project' or 'field' -> the packaged model file."""
     return asset(model_file(kind))
+
+
+def field_models(threads: int | None = None) -> FieldModels:
+    return FieldModels(session(str(model_path("project")), threads), session(str(model_path("field")), threads))
 
 
 @lru_cache(maxsize=8)

@@ -1,0 +1,152 @@
+"""The field baked into a grid once per decode (numpy + OpenCV + the ONNX project and field graphs), so that
+rendering reads a table instead of running the network for every sample (the PlenOctrees / SNeRG
+idea, here for a view-independent decoder, where baking loses only interpolation).
+
+Grid: (B, B, B) cells over the unit box [-1, 1]^3, indexed [ix, iy, iz], values at cell centres:
+density logit (interpolated, then exp: DVGO's post-activation, which keeps surfaces sharp) and rgb in
+[0, 1] (interpolated after the sigmoid). Only cells near the surface run the network: a coarse pass
+(B/4 per axis) finds the occupied cells and the opaque interior, and the fine pass evaluates the
+occupied cells that are not interior; every other cell keeps its coarse value (nearest).
+
+For trilinear reads with OpenCV, the grid is stored as an atlas: z-slice k is a (B, B) tile, rows iy
+and columns ix; `cv2.remap` interpolates inside two adjacent slices (coordinates clamped to the tile,
+so a neighbouring tile is only ever read with weight 0) and numpy blends them."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from snapshot3d import formats
+
+from .march import Frame
+
+__all__ = ["Baked", "cell_coords", "interp_matrix", "grid_field", "bake_field", "sample_baked", "sample_points",
+           "dilate3", "erode3"]
+
+COARSE = 4          # the coarse pass has B / COARSE cells per axis
+DENSE_ALPHA = 0.5   # a coarse cell is opaque when one reference step through its centre is this opaque
+
+
+@dataclass(frozen=True)
+class Baked:
+    atlas: np.ndarray   # (rows * B, cols * B, 4) float32: density logit, r, g, b
+    grid: np.ndarray    # (B, B, B, 4) float32, the same values indexed [ix, iy, iz]
+    res: int            # B
+    cols: int           # tiles per atlas row
+    sigma: np.ndarray   # (B/2, B/2, B/2) float32 density at the cell centres of the level below, for the probe
+    evaluated: int      # network evaluations the bake took (coarse + fine)
+
+    @property
+    def tile_x(self) -> np.ndarray:
+        """(B,) float32 atlas column of each z-slice's tile origin"""
+        return (np.arange(self.res) % self.cols * self.res).astype(np.float32)
+
+    @property
+    def tile_y(self) -> np.ndarray:
+        return (np.arange(self.res) // self.cols * self.res).astype(np.float32)
+
+
+def cell_coords(res: int) -> np.ndarray:
+    """(res,) float32 unit coordinates of the cell centres along one axis."""
+    return ((np.arange(res, dtype=np.float32) + 0.5) / res * 2 - 1).astype(np.float32)
+
+
+def interp_matrix(coords: np.ndarray, r: int) -> np.ndarray:
+    """(B, r) float32 bilinear weights of unit coordinates (B,) over r texels (align_corners, border
+    clamp: as `train.field.sample_planes`)."""
+    u = np.clip((coords.astype(np.float64) + 1) * 0.5 * (r - 1), 0, r - 1)
+    u0 = np.minimum(np.floor(u), r - 2).astype(np.int64)
+    m = np.zeros((len(u), r), np.float32)
+    np.add.at(m, (np.arange(len(u)), u0), 1 - (u - u0))
+    np.add.at(m, (np.arange(len(u)), u0 + 1), u - u0)
+    return m
+
+
+def grid_field(models, planes12: np.ndarray, res: int, cells: np.ndarray, chunk: int = 1 << 16):
+    """The field at cell centres of a res^3 grid: cells (M, 3) int [ix, iy, iz] -> density logit (M,),
+    rgb (M, 3). One `project` call reads the planes at every grid node; `field` then runs per cell."""
+    if len(cells) == 0:
+        return np.zeros(0, np.float32), np.zeros((0, 3), np.float32)
+    interp = interp_matrix(cell_coords(res), planes12.shape[-1])
+    tables = models.project.run(None, {"planes": planes12, "interp": interp})[0]
+    rows = np.stack([cells[:, b] * res + cells[:, a] for a, b in formats.PLANE_AXES], 1).astype(np.int64)
+    outs = [models.field.run(None, {"tables": tables, "rows": rows[i:i + chunk]}) for i in range(0, len(rows), chunk)]
+    return np.concatenate([o[0] for o in outs]), np.concatenate([o[1] for o in outs])
+
+
+def _neighbourhood(mask: np.ndarray, op) -> np.ndarray:
+    """3x3x3 max (dilate) or min (erode) of a bool grid, the outside counted as False."""
+    p = np.pad(mask, 1)
+    n = mask.shape[0]
+    out = p[1:-1, 1:-1, 1:-1].copy()
+    for dx in range(3):
+        for dy in range(3):
+            for dz in range(3):
+                op(out, p[dx:dx + n, dy:dy + n, dz:dz + n], out=out)
+    return out
+
+
+def dilate3(mask: np.ndarray) -> np.ndarray:
+    return _neighbourhood(mask, np.logical_or)
+
+
+def erode3(mask: np.ndarray) -> np.ndarray:
+    return _neighbourhood(mask, np.logical_and)
+
+
+def _atlas(grid: np.ndarray, cols: int) -> np.ndarray:
+    """(B, B, B, K) [ix, iy, iz] -> the tiled atlas (see the module doc)."""
+    b, k = grid.shape[0], grid.shape[3]
+    rows = -(-b // cols)
+    tiles = np.zeros((rows * cols, b, b, k), np.float32)
+    tiles[:b] = grid.transpose(2, 1, 0, 3)
+    return np.ascontiguousarray(tiles.reshape(rows, cols, b, b, k).transpose(0, 2, 1, 3, 4)).reshape(rows * b, cols * b, k)
+
+
+def _upsample(a: np.ndarray, f: int) -> np.ndarray:
+    """(n, n, n, ...) -> (f n, f n, f n, ...), each cell repeated (one copy)."""
+    n = a.shape[0]
+    b = np.broadcast_to(a[:, None, :, None, :, None], (n, f, n, f, n, f, *a.shape[3:]))
+    return b.reshape(n * f, n * f, n * f, *a.shape[3:])
+
+
+def bake_field(models, planes12: np.ndarray, frame: Frame, res: int) -> Baked:
+    """Bake the field of planes12 (3, C_MAX, R, R) at res^3 (res a multiple of 2 * COARSE) with the
+    renderer's graphs (`runtime.FieldModels`)."""
+    if res % (2 * COARSE) or res < 2 * COARSE:
+        raise ValueError(f"bake resolution must be a positive multiple of {2 * COARSE}, got {res}")
+    nc = res // COARSE
+    logit_c, rgb_c = grid_field(models, planes12, nc, np.argwhere(np.ones((nc, nc, nc), bool)))
+    alpha = -np.expm1(-np.exp(logit_c) * frame.step).reshape(nc, nc, nc)
+    shell = dilate3(alpha > formats.OCC_ALPHA_THRESHOLD) & ~erode3(alpha > DENSE_ALPHA)
+    grid = _upsample(np.concatenate([logit_c[:, None], rgb_c], 1).reshape(nc, nc, nc, 4), COARSE)
+    fine = np.argwhere(_upsample(shell, COARSE))
+    logit_f, rgb_f = grid_field(models, planes12, res, fine)
+    grid[fine[:, 0], fine[:, 1], fine[:, 2]] = np.concatenate([logit_f[:, None], rgb_f], 1)
+    h = res // 2
+    sigma = np.exp(grid[..., 0]).reshape(h, 2, h, 2, h, 2).mean((1, 3, 5), dtype=np.float32)
+    cols = int(np.ceil(np.sqrt(res)))
+    return Baked(_atlas(grid, cols), grid, res, cols, sigma, int(nc ** 3 + len(fine)))
+
+
+def sample_baked(baked: Baked, gx: np.ndarray, gy: np.ndarray, gz: np.ndarray):
+    """Trilinear read at cell coordinates gx, gy, gz (N, S) each (`march.ray_cells`; cell i's centre
+    at i; clamped to the grid; N < 32767, OpenCV's map limit) -> density logit (N, S), rgb (N, S, 3)."""
+    b = baked.res
+    gx, gy, gz = (np.clip(g, 0.0, b - 1, dtype=np.float32) for g in (gx, gy, gz))
+    z0 = np.minimum(gz.astype(np.int32), b - 2)
+    fz = (gz - z0)[..., None]
+    lo = cv2.remap(baked.atlas, baked.tile_x[z0] + gx, baked.tile_y[z0] + gy, cv2.INTER_LINEAR)
+    hi = cv2.remap(baked.atlas, baked.tile_x[z0 + 1] + gx, baked.tile_y[z0 + 1] + gy, cv2.INTER_LINEAR)
+    v = lo + (hi - lo) * fz
+    return v[..., 0], v[..., 1:]
+
+
+def sample_points(baked: Baked, unit: np.ndarray, width: int = 1024):
+    """sample_baked at any number of points (M, 3) in unit coordinates -> logit (M,), rgb (M, 3)."""
+    m = len(unit)
+    cells = np.pad((unit + 1.0) * (0.5 * baked.res) - 0.5, ((0, (-m) % width), (0, 0)))
+    logit, rgb = sample_baked(baked, *(cells[:, k].reshape(-1, width) for k in range(3)))
+    return logit.reshape(-1)[:m], rgb.reshape(-1, 3)[:m]
