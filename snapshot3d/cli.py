@@ -108,6 +108,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="baseline a: the codec trained without the channel")
     bc.set_defaults(func=_run("snapshot3d.train.codec_bench_run", "bench_codec_command"))
 
+    bj = bsub.add_parser("codec-jpeg", help="restore_psnr of a snapshot file through JPEG (4:2:0, 4:4:4), "
+                                            "chroma subsampling, noise and blur, one at a time")
+    bj.add_argument("--out", default="bench/results", help="output folder")
+    bj.add_argument("--compare", default=None, help="another codec weights file measured beside the shipped one")
+    bj.set_defaults(func=_run("snapshot3d.train.codec_jpeg_bench", "bench_codec_jpeg_command"))
+
     bd = bsub.add_parser("decode", help="torch-free decode of simulated photos: decode_ms per stage, restore_psnr, "
                                         "e2e_psnr; a speed/accuracy sweep and its chart")
     bd.add_argument("--out", default="bench/results", help="output folder")

@@ -91,4 +91,8 @@ def test_fine_tune_refuses_another_architecture(tmp_path):
     from snapshot3d.train.config import CodecConfig
     with pytest.raises(UserError, match="another architecture"):
         train_codec(CodecConfig(blocks=2, init=str(codec_path())), None, tmp_path / "x.npz")
+    with pytest.raises(UserError, match="jpeg-prob"):
+        train_codec(CodecConfig(jpeg_prob=1.5), None, tmp_path / "x.npz")
+    with pytest.raises(UserError, match="not found"):
+        train_codec(CodecConfig(init=str(tmp_path / "missing.npz")), None, tmp_path / "x.npz")
     assert not (tmp_path / "x.npz").exists()

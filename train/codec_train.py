@@ -90,6 +90,8 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
     """Train (or resume) and write the weights to `out`; returns the run's summary."""
     torch.manual_seed(cfg.seed)
     net = build_codec(cfg)
+    if not 0.0 <= cfg.jpeg_prob <= 1.0:
+        raise UserError(f"--jpeg-prob must be in [0, 1], got {cfg.jpeg_prob}")
     ranges = replace(ranges, jpeg_prob=cfg.jpeg_prob)
     if cfg.init:
         start, start_cfg = load_codec(Path(cfg.init))

@@ -13,7 +13,7 @@ and columns ix; `cv2.remap` interpolates inside two adjacent slices (coordinates
 so a neighbouring tile is only ever read with weight 0) and numpy blends them."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -37,15 +37,13 @@ class Baked:
     cols: int           # tiles per atlas row
     sigma: np.ndarray   # (B/2, B/2, B/2) float32 density at the cell centres of the level below, for the probe
     evaluated: int      # network evaluations the bake took (coarse + fine)
+    tile_x: np.ndarray = field(init=False)  # (B,) float32 atlas column of each z-slice's tile origin
+    tile_y: np.ndarray = field(init=False)  # (B,) float32 atlas row of it
 
-    @property
-    def tile_x(self) -> np.ndarray:
-        """(B,) float32 atlas column of each z-slice's tile origin"""
-        return (np.arange(self.res) % self.cols * self.res).astype(np.float32)
-
-    @property
-    def tile_y(self) -> np.ndarray:
-        return (np.arange(self.res) // self.cols * self.res).astype(np.float32)
+    def __post_init__(self):  # once per bake, not per read
+        z = np.arange(self.res)
+        object.__setattr__(self, "tile_x", (z % self.cols * self.res).astype(np.float32))
+        object.__setattr__(self, "tile_y", (z // self.cols * self.res).astype(np.float32))
 
 
 def cell_coords(res: int) -> np.ndarray:

@@ -34,12 +34,11 @@ class Decoded:
 
 
 def restore_planes(snapshot: np.ndarray, res: int, channels: int, strength: float = 1.0):
-    """snapshot (380, 380, 3) uint8 RGB -> planes (3, C, R, R) float32 (8-bit values, as carried) and
-    the raw secret (24, 190, 190)."""
+    """snapshot (380, 380, 3) uint8 RGB -> planes (3, C, R, R) float32 (8-bit values, as carried)."""
     x = (snapshot.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
     secret = session(str(model_path("restore"))).run(None, {"snapshot": np.ascontiguousarray(x)})[0][0] / strength
     planes = codec_layout.secret_to_planes(secret, res, channels)
-    return dequantize_planes(quantize_planes(planes)), secret
+    return dequantize_planes(quantize_planes(planes))
 
 
 def scene_from_meta(codes: np.ndarray, meta) -> Scene:
@@ -73,7 +72,7 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
     res = scan_file(path)
     meta = _meta(res.qr)
     t1 = time.perf_counter()
-    planes, secret = restore_planes(res.snapshot, *meta.planes, meta.strength or 1.0)
+    planes = restore_planes(res.snapshot, *meta.planes, meta.strength or 1.0)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
     models = field_models()
