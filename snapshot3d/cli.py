@@ -114,6 +114,16 @@ def build_parser() -> argparse.ArgumentParser:
     bj.add_argument("--compare", default=None, help="another codec weights file measured beside the shipped one")
     bj.set_defaults(func=_run("snapshot3d.train.codec_jpeg_bench", "bench_codec_jpeg_command"))
 
+    bq = bsub.add_parser("capacity", help="the capture channel's Gaussian capacity per severity and the best "
+                                          "restore_psnr it allows, beside the shipped codec's, per plane size")
+    bq.add_argument("--out", default="bench/results", help="output folder")
+    bq.add_argument("--scenes", default="snapshot3d/assets/spot.s3d,bench/models/spot-r48c4.s3d,bench/models/spot-r32c4.s3d",
+                    help="comma-separated scene files (spot fitted at several plane sizes)")
+    bq.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from training)")
+    bq.add_argument("--seeds", type=int, default=3, help="simulated photos per physical severity")
+    bq.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
+    bq.set_defaults(func=_run("snapshot3d.train.capacity_bench", "bench_capacity_command"))
+
     bd = bsub.add_parser("decode", help="torch-free decode of simulated photos: decode_ms per stage, restore_psnr, "
                                         "e2e_psnr; a speed/accuracy sweep and its chart")
     bd.add_argument("--out", default="bench/results", help="output folder")

@@ -5,10 +5,7 @@ of about JPEG-95's size, blur. `restore_psnr` of 20 orbit views at 128x128 (the 
 of the restored planes against those of the original planes). Writes codec_jpeg.{csv,json,png}."""
 from __future__ import annotations
 
-import csv
 import json
-import os
-import sys
 from pathlib import Path
 
 import cv2
@@ -18,6 +15,7 @@ from snapshot3d import codec_layout, formats
 from snapshot3d.cameras import orbit_cameras
 from snapshot3d.metrics import psnr
 from snapshot3d.paths import asset
+from snapshot3d.reports import write_report
 from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
 from snapshot3d.viewer.render import render_views
 from snapshot3d.viewer.runtime import field_models
@@ -82,18 +80,12 @@ def bench_codec_jpeg_command(args) -> int:
                              "image_psnr": min(psnr(seen / 255.0, snap / 255.0), 100.0),  # 100: identical
                              "restore_psnr": psnr(views, ref)})
                 print(f"{label} {host} {name}: restore_psnr {rows[-1]['restore_psnr']:.2f}", flush=True)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "codec_jpeg.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
     summary = {label: {name: {k: float(np.median([r[k] for r in rows if r["codec"] == label and r["distortion"] == name]))
                               for k in ("image_psnr", "restore_psnr")} for name in DISTORTIONS}
                for label in dict.fromkeys(r["codec"] for r in rows)}
-    doc = {"command": "snapshot3d " + " ".join(sys.argv[1:]), "cores": os.cpu_count(), "scene": "spot",
-           "hosts": ["coffee", "chelsea"], "view_size": SIZE, "summary": summary}
-    (out / "codec_jpeg.json").write_text(json.dumps(doc, indent=2) + "\n")
+    out = Path(args.out)
+    write_report(out, "codec_jpeg", rows, {"scene": "spot", "hosts": ["coffee", "chelsea"], "view_size": SIZE,
+                                           "summary": summary})
     _chart(summary, out / "codec_jpeg.png")
     print(json.dumps(summary, indent=1))
     return 0

@@ -139,7 +139,10 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
             l_plane = F.mse_loss(prest, planes)
             l_view = views.loss(scene, prest, gen)
             loss = loss + cfg.plane_weight * l_plane + cfg.view_weight * l_view
-            rec.update(plane_mse=l_plane.item(), view_psnr=_psnr(l_view.item()))
+            rec.update(plane_mse=l_plane.item(), view_psnr=_psnr(l_view.item()),
+                       full_host_psnr=_psnr(F.mse_loss(fsnap.clamp(0, 1), fhost).item()))
+            if cfg.full_host:
+                loss = loss + math.exp(logw) * host_loss(fsnap, fhost, cfg.low_weight)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), 1.0)

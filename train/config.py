@@ -75,6 +75,8 @@ class CodecConfig:
     ramp: float = _f(0.5, "fraction of the run over which the channel level rises from 0 to its maximum")
     jpeg_prob: float = _f(0.6, "probability that a training image goes through JPEG (after the other distortions)")
     init: str = _f("", "codec weights to start from (a fine-tune with the same architecture); empty: random")
+    full_host: bool = _f(False, "also put the host loss on every whole snapshot (real scenes' secrets are denser than "
+                                "the augmented crops'; without it a run can let whole snapshots drift from the host)")
     holdout_scenes: str = _f("spot", "comma-separated scenes never trained on (evaluation)")
     holdout_hosts: str = _f("coffee,chelsea", "comma-separated host photos never trained on (evaluation)")
     seed: int = _f(0, "random seed")
