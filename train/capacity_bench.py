@@ -46,12 +46,8 @@ def noise_curve(judge: _Judge, seed: int = 0) -> list[tuple[float, float]]:
     for sigma in NOISE_SIGMAS:
         noisy = dequantize_planes(quantize_planes(planes + rng.normal(0, sigma, planes.shape).astype(np.float32)))
         rmse = float(np.sqrt(np.mean((noisy - planes) ** 2)))
-        out.append((rmse, _psnr_views(judge, noisy)))
+        out.append((rmse, psnr(judge.views(noisy), judge.ref)))
     return out
-
-
-def _psnr_views(judge: _Judge, planes: np.ndarray) -> float:
-    return psnr(judge.views(planes), judge.ref)
 
 
 def psnr_at(curve: list[tuple[float, float]], rmse: float) -> float:
