@@ -17,14 +17,13 @@ import numpy as np
 
 from snapshot3d import formats
 from snapshot3d.errors import UserError
-from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
-
 from snapshot3d.metrics import psnr
 from snapshot3d.reports import write_report
+from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
 
 from .capacity import best_plane_rmse, capacity_bits, fit_channel
 from .codec import embed_planes, load_codec, restore_secret
-from .codec_bench import _Judge, through_channel
+from .codec_bench import _Judge, capture_seeds, through_channel
 from .codec_bench_run import SEVERITIES
 from .codec_commands import load_host, scene_meta
 from .oracle import oracle_correct
@@ -63,7 +62,7 @@ def _capture_rows(net, judge, sname, hname, host, seeds) -> list[dict]:
     sent = snap[_CROP:-_CROP, _CROP:-_CROP] / 255.0
     rows = []
     for sev in SEVERITIES:
-        for seed in (range(seeds) if sev in ("mild", "moderate", "severe") else [0]):
+        for seed in capture_seeds(sev, seeds):
             rect = through_channel(snap, scene_meta(scene, 1.0), sev, seed)
             if rect is None:
                 continue

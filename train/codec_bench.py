@@ -36,10 +36,16 @@ from .config import CodecConfig
 from .decoder import load_decoder
 from .render import render_views
 
-__all__ = ["through_channel", "lsb_embed", "lsb_extract", "FIELDS"]
+__all__ = ["capture_seeds", "through_channel", "lsb_embed", "lsb_extract", "FIELDS"]
 
 FIELDS = ["method", "scene", "host", "severity", "seed", "strength", "host_psnr", "host_ssim", "restore_psnr",
           "detected", "views", "carried_psnr", "uncarried_psnr", "blocks", "width", "params", "restore_ms"]
+
+
+def capture_seeds(severity: str, seeds: int):
+    """Seeds to capture a severity with: `seeds` photos for the physical ones, one for the digital ones
+    (a JPEG file or a lossless copy does not depend on the seed)."""
+    return range(seeds) if severity in ("mild", "moderate", "severe") else [0]
 
 
 def through_channel(snap: np.ndarray, meta, severity: str, seed: int) -> np.ndarray | None:
@@ -98,7 +104,7 @@ def _codec_rows(method, net, judge, scene_name, host_name, host, severities, see
             "host_psnr": psnr(snap / 255, host8 / 255), "host_ssim": ssim(snap / 255, host8 / 255)}
     rows = []
     for sev in severities:
-        for seed in (range(seeds) if sev in ("mild", "moderate", "severe") else [0]):
+        for seed in capture_seeds(sev, seeds):
             rect = through_channel(snap, scene_meta(scene, strength), sev, seed)
             row = dict(base, severity=sev, seed=seed, detected=int(rect is not None))
             if rect is not None:
