@@ -23,7 +23,7 @@ from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
 
 from .capacity import best_plane_rmse, capacity_bits, fit_channel
 from .codec import embed_planes, load_codec, restore_secret
-from .codec_bench import _Judge, capture_seeds, through_channel
+from .codec_bench import ViewJudge, capture_seeds, through_channel
 from .codec_bench_run import SEVERITIES
 from .codec_commands import load_host, scene_meta
 from .oracle import oracle_correct
@@ -37,7 +37,7 @@ NOISE_SIGMAS = (0.004, 0.01, 0.02, 0.04, 0.07, 0.1, 0.15, 0.2, 0.3, 0.45)
 _CROP = 2  # 380 -> 376 = 47 * 8, for three Haar levels
 
 
-def noise_curve(judge: _Judge, seed: int = 0) -> list[tuple[float, float]]:
+def noise_curve(judge: ViewJudge, seed: int = 0) -> list[tuple[float, float]]:
     """(plane RMS error, restore_psnr) of the scene's planes plus i.i.d. Gaussian noise, as carried (8-bit)."""
     rng = np.random.default_rng(seed)
     planes = judge.scene.planes()
@@ -116,7 +116,7 @@ def bench_capacity_command(args) -> int:
         raise UserError(f"none of the scenes {args.scenes} exists")
     rows, curves = [], {}
     for sname, scene in scenes.items():
-        judge = _Judge(scene, args.size)
+        judge = ViewJudge(scene, args.size)
         curves[sname] = noise_curve(judge)
         for hname in args.hosts.split(","):
             rows += _capture_rows(net, judge, sname, hname, load_host("builtin:" + hname), args.seeds)

@@ -4,7 +4,8 @@ fidelity, through the real channel.
 Every snapshot goes the user's way: sheet -> `simulate` (severity, seed) -> `scan` -> restore -> the 20
 orbit views, compared with the views of the original planes (`restore_psnr`). Rows (codec.csv):
 - `ours` and `digital` (the same network and budget trained without the channel, baseline a) at
-  every severity, for each evaluation scene, host and seed;
+  every severity, for each evaluation scene, host and seed; `ours-refined`: ours with the snapshot
+  refined at embed time (`snapshot3d embed`'s default, `train.codec_refine`);
 - `ours` at several embedding strengths (the host-vs-restore trade-off);
 - `lsb` (baseline b): 8-bit plane codes in the two least-significant bits of the host;
 - `views-N` (baseline c): N fixed rendered orbit views carried instead of planes (the Video Snapshot /
@@ -36,7 +37,7 @@ from .config import CodecConfig
 from .decoder import load_decoder
 from .render import render_views
 
-__all__ = ["capture_seeds", "through_channel", "lsb_embed", "lsb_extract", "FIELDS"]
+__all__ = ["capture_seeds", "through_channel", "lsb_embed", "lsb_extract", "FIELDS", "ViewJudge"]
 
 FIELDS = ["method", "scene", "host", "severity", "seed", "strength", "host_psnr", "host_ssim", "restore_psnr",
           "detected", "views", "carried_psnr", "uncarried_psnr", "blocks", "width", "params", "restore_ms"]
@@ -80,7 +81,7 @@ def lsb_extract(img8: np.ndarray, shape: tuple, bits: int = 2) -> np.ndarray:
     return np.packbits(stream.ravel()).reshape(shape)
 
 
-class _Judge:
+class ViewJudge:
     """Renders the orbit views of planes and scores them against the original scene's."""
 
     def __init__(self, scene, size: int):
@@ -96,9 +97,14 @@ class _Judge:
         return psnr(self.views(dequantize_planes(quantize_planes(planes))), self.ref)
 
 
-def _codec_rows(method, net, judge, scene_name, host_name, host, severities, seeds, strength):
+def _codec_rows(method, net, judge, scene_name, host_name, host, severities, seeds, strength, refine=0):
+    """Rows of one embedding (`refine` > 0: the snapshot refined that many steps, as `embed --refine`)."""
     scene = judge.scene
-    snap = embed_planes(net, host, scene.planes(), strength)
+    if refine:
+        from .codec_refine import refine_snapshot
+        snap = refine_snapshot(net, host, scene.planes(), refine, strength)[0]
+    else:
+        snap = embed_planes(net, host, scene.planes(), strength)
     host8 = (host * 255 + 0.5).astype(np.uint8)
     base = {"method": method, "scene": scene_name, "host": host_name, "strength": strength,
             "host_psnr": psnr(snap / 255, host8 / 255), "host_ssim": ssim(snap / 255, host8 / 255)}

@@ -35,7 +35,7 @@ def write_codec_chart(rows: list[dict], path: Path, cores: int) -> None:
 
     fig, ax = plt.subplots(2, 2, figsize=(13, 9))
     a = ax[0, 0]
-    for method in dict.fromkeys(r["method"] for r in rows if r["method"] in ("ours", "digital", "lsb")):
+    for method in dict.fromkeys(r["method"] for r in rows if r["method"] in ("ours", "ours-refined", "digital", "lsb")):
         meds = _median_by_sev(rows, method)
         line, = a.plot(range(len(_SEV)), meds, "o-", label=method)
         b = break_severity(meds)

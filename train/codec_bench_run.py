@@ -17,7 +17,7 @@ from snapshot3d.images import write_png
 from snapshot3d.scene import load_scene_file
 
 from .codec import load_codec
-from .codec_bench import FIELDS, _arch_rows, _codec_rows, _Judge, _lsb_rows, _views_rows
+from .codec_bench import FIELDS, ViewJudge, _arch_rows, _codec_rows, _lsb_rows, _views_rows
 from .codec_commands import load_host
 
 __all__ = ["bench_codec_command", "summarise"]
@@ -47,8 +47,9 @@ def summarise(rows: list[dict], scenes=None) -> dict:
     return out
 
 
-def side_by_side(net, scene, host, judge, out: Path) -> None:
-    """Rows: original views, restored from a JPEG-75 snapshot file, restored from a `moderate` photo."""
+def side_by_side(net, scene, host, judge, out: Path, refine: int = 0) -> None:
+    """Rows: original views, restored from a JPEG-75 snapshot file, restored from a `moderate` photo
+    (the snapshot as `snapshot3d embed --refine REFINE` writes it)."""
     import cv2
 
     from snapshot3d import codec_layout
@@ -57,8 +58,9 @@ def side_by_side(net, scene, host, judge, out: Path) -> None:
     from .codec import embed_planes, restore_secret
     from .codec_bench import through_channel
     from .codec_commands import scene_meta
+    from .codec_refine import refine_snapshot
 
-    snap = embed_planes(net, host, scene.planes())
+    snap = refine_snapshot(net, host, scene.planes(), refine)[0] if refine else embed_planes(net, host, scene.planes())
     ok, buf = cv2.imencode(".jpg", cv2.cvtColor(snap, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 75])
     jpeg = cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
     photo = through_channel(snap, scene_meta(scene, 1.0), "moderate", 0)
@@ -85,9 +87,12 @@ def bench_codec_command(args) -> int:
     hosts = {h: load_host("builtin:" + h) for h in args.hosts.split(",")}
     rows = []
     for sname, scene in scenes.items():
-        judge = _Judge(scene, args.size)
+        judge = ViewJudge(scene, args.size)
         for hname, host in hosts.items():
             rows += _codec_rows("ours", net, judge, sname, hname, host, SEVERITIES, args.seeds, 1.0)[0]
+            if args.refine:
+                rows += _codec_rows("ours-refined", net, judge, sname, hname, host, SEVERITIES, args.seeds, 1.0,
+                                    args.refine)[0]
             if digital is not None:
                 rows += _codec_rows("digital", digital, judge, sname, hname, host, SEVERITIES, args.seeds, 1.0)[0]
             rows += _lsb_rows(judge, sname, hname, host, SEVERITIES)
@@ -98,7 +103,7 @@ def bench_codec_command(args) -> int:
         for s in (float(v) for v in args.strengths.split(",")):
             rows += _codec_rows("strength", net, judge, sname, hname, host, ("none", "jpeg75", "moderate"), 1, s)[0]
         rows += _views_rows(net, judge, sname, hname, host, ("none", "jpeg75", "moderate"))
-        side_by_side(net, scene, host, judge, out / "codec_side_by_side.png")
+        side_by_side(net, scene, host, judge, out / "codec_side_by_side.png", args.refine)
     rows += _arch_rows()
     with open(out / "codec.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS, extrasaction="ignore")

@@ -61,9 +61,12 @@ def embed_command(args) -> int:
     from snapshot3d.scanner.snapfile import write_snapshot
 
     from .codec import embed_planes, load_codec
+    from .codec_refine import refine_snapshot
 
     if not 0.05 <= args.strength <= 10:
         raise UserError("--strength must be in [0.05, 10]")
+    if not 0 <= args.refine <= 5000:
+        raise UserError("--refine must be in [0, 5000] steps")
     if Path(args.output).suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise UserError(f"cannot write {Path(args.output).name}: a snapshot is written as .png (or .jpg)")
     scene = load_scene_file(args.scene)
@@ -74,13 +77,16 @@ def embed_command(args) -> int:
     host = load_host(args.host)
     net, _ = load_codec()
     t0 = time.perf_counter()
-    snap = embed_planes(net, host, scene.planes(), args.strength)
+    if args.refine:
+        snap, _ = refine_snapshot(net, host, scene.planes(), args.refine, args.strength)
+    else:
+        snap = embed_planes(net, host, scene.planes(), args.strength)
     secs = time.perf_counter() - t0
     write_snapshot(args.output, snap, scene_meta(scene, args.strength), jpeg_quality=args.jpeg_quality)
     host8 = (host * 255 + 0.5).astype(np.uint8)
     report = {"host_psnr": psnr(snap / 255.0, host8 / 255.0), "host_ssim": ssim(snap / 255.0, host8 / 255.0),
               "scene_kb": scene.scene_kb, "strength": args.strength, "codec": formats.CODEC_VERSION,
-              "embed_ms": secs * 1000}
+              "refine_steps": args.refine, "embed_ms": secs * 1000}
     if args.report:
         write_report(args.report, report)
     print(f"wrote {args.output}: host_psnr {report['host_psnr']:.2f} dB, host_ssim {report['host_ssim']:.4f}, "

@@ -1,7 +1,9 @@
 """`snapshot3d bench codec-jpeg`: why a snapshot file does not survive JPEG. Spot hidden in the
 held-out hosts by a codec, then one digital distortion of the 380x380 snapshot itself at a time:
 JPEG files at several qualities with 4:2:0 and 4:4:4 chroma, chroma subsampling alone, Gaussian noise
-of about JPEG-95's size, blur. `restore_psnr` of 20 orbit views at 128x128 (the fast renderer's views
+of about JPEG-95's size, blur, and sub-pixel shifts (the misregistration a scan leaves: about 0.4 px on
+`moderate` photos, `bench/results/channel.json`). With `--refine N`, the same for snapshots refined at
+embed time (`train.codec_refine`). `restore_psnr` of 20 orbit views at 128x128 (the fast renderer's views
 of the restored planes against those of the original planes). Writes codec_jpeg.{csv,json,png}."""
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from snapshot3d.viewer.runtime import field_models
 
 from .codec import embed_planes, load_codec, restore_secret
 from .codec_commands import load_host
+from .codec_refine import refine_snapshot
 
 __all__ = ["bench_codec_jpeg_command", "DISTORTIONS"]
 
@@ -48,6 +51,12 @@ def _noise(img: np.ndarray, sigma: float) -> np.ndarray:
     return np.clip(img + rng.normal(0, sigma, img.shape), 0, 255).astype(np.uint8)
 
 
+def _shift(img: np.ndarray, px: float) -> np.ndarray:
+    """Translate by `px` pixels along x and y, bilinear, borders reflected."""
+    m = np.float32([[1, 0, px], [0, 1, px]])
+    return cv2.warpAffine(img, m, img.shape[1::-1], flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+
+
 # name -> snapshot (380, 380, 3) uint8 RGB -> what the restore network sees
 DISTORTIONS = {
     "none": lambda x: x,
@@ -59,6 +68,8 @@ DISTORTIONS = {
     "chroma 4:2:0 only": _chroma_420,
     "noise sigma 4/255": lambda x: _noise(x, 4.0),
     "blur sigma 1 px": lambda x: cv2.GaussianBlur(x, (0, 0), 1.0),
+    "shift 0.25 px": lambda x: _shift(x, 0.25),
+    "shift 0.5 px": lambda x: _shift(x, 0.5),
 }
 
 
@@ -68,10 +79,13 @@ def bench_codec_jpeg_command(args) -> int:
     models = field_models()
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, SIZE, SIZE)
     rows = []
-    for label, path in (("shipped", None), *([("first stage", args.compare)] if args.compare else [])):
+    runs = [("shipped", None, 0), *([(f"shipped, refined {args.refine}", None, args.refine)] if args.refine else []),
+            *([("first stage", args.compare, 0)] if args.compare else [])]
+    for label, path, refine in runs:
         net, _ = load_codec(Path(path) if path else None)
         for host in ("coffee", "chelsea"):
-            snap = embed_planes(net, load_host("builtin:" + host), scene.planes())
+            hrgb = load_host("builtin:" + host)
+            snap = refine_snapshot(net, hrgb, scene.planes(), refine)[0] if refine else embed_planes(net, hrgb, scene.planes())
             for name, fn in DISTORTIONS.items():
                 seen = fn(snap)
                 planes = codec_layout.secret_to_planes(restore_secret(net, seen), scene.resolution, scene.channels)

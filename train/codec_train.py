@@ -122,13 +122,14 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
         top = curriculum_level(step, cfg.steps, cfg.ramp)
         host, secret = crop_batch(data, cfg.batch, cfg.crop, rng, cfg.levels)
         level = torch.rand(cfg.batch, generator=gen) * top
-        snap, _ = net(host, secret)
+        snap, z = net(host, secret)
         _, rest = net.reverse(_channel(snap, level, cfg, ranges, gen))
         l_host = host_loss(snap, host, cfg.low_weight)
         l_sec = F.mse_loss(rest, secret)
-        loss = math.exp(logw) * l_host + l_sec
+        l_z = F.mse_loss(z, net.z.expand_as(z))
+        loss = math.exp(logw) * l_host + l_sec + cfg.z_weight * l_z
         rec = {"step": step, "level": top, "host_psnr": _psnr(F.mse_loss(snap.clamp(0, 1), host).item()),
-               "secret_mse": l_sec.item()}
+               "secret_mse": l_sec.item(), "z_mse": l_z.item()}
         if cfg.full_every and step % cfg.full_every == 0:
             fhost, scene = full_sample(data, rng)
             planes = torch.from_numpy(scene.planes())

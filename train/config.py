@@ -77,6 +77,8 @@ class CodecConfig:
     init: str = _f("", "codec weights to start from (a fine-tune with the same architecture); empty: random")
     full_host: bool = _f(False, "also put the host loss on every whole snapshot (real scenes' secrets are denser than "
                                 "the augmented crops'; without it a run can let whole snapshots drift from the host)")
+    z_weight: float = _f(0.0, "weight of the loss pulling the forward pass's lost part z to the learned constant the "
+                              "reverse pass uses in its place (0: off, as HiNet)")
     holdout_scenes: str = _f("spot", "comma-separated scenes never trained on (evaluation)")
     holdout_hosts: str = _f("coffee,chelsea", "comma-separated host photos never trained on (evaluation)")
     seed: int = _f(0, "random seed")

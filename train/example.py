@@ -1,5 +1,5 @@
 """`snapshot3d make-example`: the bundled example photo the demo decodes: the bundled spot scene
-hidden in a bundled host (`embed`), put on a sheet, captured by the simulator. The default is `jpeg90`
+hidden in a bundled host (`embed`, refined at embed time as `embed` does by default), put on a sheet, captured by the simulator. The default is `jpeg90`
 (the sheet image saved as JPEG 90): the shipped codec does not yet survive physical prints well
 (bench/results/codec.json). Physical presets use a 1600x1200 frame so that the file stays small."""
 from __future__ import annotations
@@ -14,6 +14,7 @@ from snapshot3d.scene import load_scene_file
 
 from .codec import embed_planes, load_codec
 from .codec_commands import load_host, scene_meta
+from .codec_refine import refine_snapshot
 
 __all__ = ["make_example_command"]
 
@@ -24,11 +25,13 @@ def make_example_command(args) -> int:
     from snapshot3d.viewer.demo import EXAMPLE_PHOTO, EXAMPLE_SCENE
 
     scene = load_scene_file(asset(EXAMPLE_SCENE))
-    snap = embed_planes(load_codec()[0], load_host(args.host), scene.planes())
+    net, host = load_codec()[0], load_host(args.host)
+    snap = refine_snapshot(net, host, scene.planes(), args.refine)[0] if args.refine else embed_planes(net, host, scene.planes())
     preset = PRESETS[args.severity]
     preset = replace(preset, frame=(1600, 1200)) if preset.physical else preset
     data, ext, _ = simulate(render_sheet(snap, scene_meta(scene, 1.0), 4), preset, args.seed)
     out = Path(args.output) if args.output else asset(EXAMPLE_PHOTO)
     write_atomic(out, data)
-    print(f"wrote {out} ({len(data) / 1e3:.0f} kB, {args.severity}, seed {args.seed}, host {args.host})")
+    print(f"wrote {out} ({len(data) / 1e3:.0f} kB, {args.severity}, seed {args.seed}, host {args.host}, "
+          f"refine {args.refine})")
     return 0

@@ -1,0 +1,40 @@
+"""Embed-time refinement: at about the same host fidelity, the frozen restore network reads the planes
+back better from the snapshot file and from a JPEG-75 copy."""
+import cv2
+import numpy as np
+import pytest
+
+from snapshot3d import codec_layout
+from snapshot3d.metrics import psnr
+from snapshot3d.paths import asset
+from snapshot3d.scene import load_scene_file
+from snapshot3d.train.codec import embed_planes, load_codec, restore_secret
+from snapshot3d.train.codec_commands import load_host
+from snapshot3d.train.codec_refine import refine_snapshot
+
+
+@pytest.fixture(scope="module")
+def setup():
+    return load_codec()[0], load_scene_file(asset("spot.s3d")), load_host("builtin:coffee")
+
+
+def _plane_psnr(net, scene, snap: np.ndarray) -> float:
+    back = codec_layout.secret_to_planes(restore_secret(net, snap), scene.resolution, scene.channels)
+    return 10 * np.log10(4.0 / np.mean((np.clip(back, -1, 1) - scene.planes()) ** 2))  # planes span [-1, 1]
+
+
+def _jpeg75(rgb: np.ndarray) -> np.ndarray:
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 75])
+    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+
+
+def test_refined_snapshot_restores_better_at_about_the_same_host(setup):
+    net, scene, host = setup
+    plain = embed_planes(net, host, scene.planes())
+    refined, info = refine_snapshot(net, host, scene.planes(), 25)
+    assert refined.shape == plain.shape and refined.dtype == np.uint8
+    assert psnr(refined / 255, host) >= psnr(plain / 255, host) - 0.6  # measured -0.4 dB after 25 steps
+    assert info["plane_mse_last"] < info["plane_mse_first"]
+    # measured (coffee, 25 steps): file 22.8 -> 30.4 dB, JPEG-75 copy 15.6 -> 16.4 dB
+    assert _plane_psnr(net, scene, refined) >= _plane_psnr(net, scene, plain) + 4.0
+    assert _plane_psnr(net, scene, _jpeg75(refined)) >= _plane_psnr(net, scene, _jpeg75(plain)) + 0.3
