@@ -1,5 +1,4 @@
 """Scene files: bit-exact round trip, quantisation, refusals."""
-import json
 
 import numpy as np
 import pytest
