@@ -23,21 +23,23 @@ import torch
 from snapshot3d import codec_layout, formats
 from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr as _psnr, ssim
-
-
-def psnr(a, b) -> float:
-    """PSNR capped at 100 dB (an exact copy), so that reports stay valid JSON."""
-    return float(min(_psnr(a, b), 100.0))
 from snapshot3d.scene import dequantize_planes, quantize_planes
 
 from .codec import build_codec, embed_planes, restore_secret
 from .codec_commands import scene_meta
+from .codec_refine import snapshot_of
 from .commands import orbit_cameras
 from .config import CodecConfig
 from .decoder import load_decoder
 from .render import render_views
 
 __all__ = ["capture_seeds", "through_channel", "lsb_embed", "lsb_extract", "FIELDS", "ViewJudge"]
+
+
+def psnr(a, b) -> float:
+    """PSNR capped at 100 dB (an exact copy), so that reports stay valid JSON."""
+    return float(min(_psnr(a, b), 100.0))
+
 
 FIELDS = ["method", "scene", "host", "severity", "seed", "strength", "host_psnr", "host_ssim", "restore_psnr",
           "detected", "views", "carried_psnr", "uncarried_psnr", "blocks", "width", "params", "restore_ms"]
@@ -100,11 +102,7 @@ class ViewJudge:
 def _codec_rows(method, net, judge, scene_name, host_name, host, severities, seeds, strength, refine=0):
     """Rows of one embedding (`refine` > 0: the snapshot refined that many steps, as `embed --refine`)."""
     scene = judge.scene
-    if refine:
-        from .codec_refine import refine_snapshot
-        snap = refine_snapshot(net, host, scene.planes(), refine, strength)[0]
-    else:
-        snap = embed_planes(net, host, scene.planes(), strength)
+    snap = snapshot_of(net, host, scene.planes(), refine, strength)
     host8 = (host * 255 + 0.5).astype(np.uint8)
     base = {"method": method, "scene": scene_name, "host": host_name, "strength": strength,
             "host_psnr": psnr(snap / 255, host8 / 255), "host_ssim": ssim(snap / 255, host8 / 255)}

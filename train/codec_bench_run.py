@@ -55,12 +55,12 @@ def side_by_side(net, scene, host, judge, out: Path, refine: int = 0) -> None:
     from snapshot3d import codec_layout
     from snapshot3d.scene import dequantize_planes, quantize_planes
 
-    from .codec import embed_planes, restore_secret
+    from .codec import restore_secret
     from .codec_bench import through_channel
     from .codec_commands import scene_meta
-    from .codec_refine import refine_snapshot
+    from .codec_refine import snapshot_of
 
-    snap = refine_snapshot(net, host, scene.planes(), refine)[0] if refine else embed_planes(net, host, scene.planes())
+    snap = snapshot_of(net, host, scene.planes(), refine)
     ok, buf = cv2.imencode(".jpg", cv2.cvtColor(snap, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 75])
     jpeg = cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
     photo = through_channel(snap, scene_meta(scene, 1.0), "moderate", 0)

@@ -60,8 +60,8 @@ def scene_from_secret(secret: np.ndarray, meta, name: str = "restored") -> Scene
 def embed_command(args) -> int:
     from snapshot3d.scanner.snapfile import write_snapshot
 
-    from .codec import embed_planes, load_codec
-    from .codec_refine import refine_snapshot
+    from .codec import load_codec
+    from .codec_refine import snapshot_of
 
     if not 0.05 <= args.strength <= 10:
         raise UserError("--strength must be in [0.05, 10]")
@@ -77,10 +77,7 @@ def embed_command(args) -> int:
     host = load_host(args.host)
     net, _ = load_codec()
     t0 = time.perf_counter()
-    if args.refine:
-        snap, _ = refine_snapshot(net, host, scene.planes(), args.refine, args.strength)
-    else:
-        snap = embed_planes(net, host, scene.planes(), args.strength)
+    snap = snapshot_of(net, host, scene.planes(), args.refine, args.strength)
     secs = time.perf_counter() - t0
     write_snapshot(args.output, snap, scene_meta(scene, args.strength), jpeg_quality=args.jpeg_quality)
     host8 = (host * 255 + 0.5).astype(np.uint8)

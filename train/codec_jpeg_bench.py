@@ -22,9 +22,9 @@ from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
 from snapshot3d.viewer.render import render_views
 from snapshot3d.viewer.runtime import field_models
 
-from .codec import embed_planes, load_codec, restore_secret
+from .codec import load_codec, restore_secret
 from .codec_commands import load_host
-from .codec_refine import refine_snapshot
+from .codec_refine import snapshot_of
 
 __all__ = ["bench_codec_jpeg_command", "DISTORTIONS"]
 
@@ -84,8 +84,7 @@ def bench_codec_jpeg_command(args) -> int:
     for label, path, refine in runs:
         net, _ = load_codec(Path(path) if path else None)
         for host in ("coffee", "chelsea"):
-            hrgb = load_host("builtin:" + host)
-            snap = refine_snapshot(net, hrgb, scene.planes(), refine)[0] if refine else embed_planes(net, hrgb, scene.planes())
+            snap = snapshot_of(net, load_host("builtin:" + host), scene.planes(), refine)
             for name, fn in DISTORTIONS.items():
                 seen = fn(snap)
                 planes = codec_layout.secret_to_planes(restore_secret(net, seen), scene.resolution, scene.channels)

@@ -24,11 +24,11 @@ import torch.nn.functional as F
 from snapshot3d import codec_layout
 
 from .channel import ChannelRanges, apply_channel
-from .codec import secret_grid
+from .codec import embed_planes, secret_grid
 from .codec_net import CodecNet
 from .codec_train import secret_to_planes_t
 
-__all__ = ["refine_snapshot", "REFINE_CHANNEL"]
+__all__ = ["refine_snapshot", "snapshot_of", "REFINE_CHANNEL"]
 
 # JPEG only, quality in [65, 95] at level 1 (level 0: the 8-bit file alone)
 REFINE_CHANNEL = ChannelRanges(shift_px=0.0, blur_px=0.0, gain=0.0, offset=0.0, gamma=0.0, saturation=0.0,
@@ -71,3 +71,10 @@ def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: 
             "plane_mse_first": float(np.mean(losses[:10])) if losses else None,
             "plane_mse_last": float(np.mean(losses[-10:])) if losses else None}
     return (snap * 255 + 0.5).astype(np.uint8), info
+
+
+def snapshot_of(net: CodecNet, host: np.ndarray, planes: np.ndarray, refine: int = 0, strength: float = 1.0) -> np.ndarray:
+    """The snapshot `snapshot3d embed --refine REFINE` writes: refined when `refine` > 0, else the network's own."""
+    if refine:
+        return refine_snapshot(net, host, planes, refine, strength)[0]
+    return embed_planes(net, host, planes, strength)

@@ -12,9 +12,9 @@ from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
 from snapshot3d.scene import load_scene_file
 
-from .codec import embed_planes, load_codec
+from .codec import load_codec
 from .codec_commands import load_host, scene_meta
-from .codec_refine import refine_snapshot
+from .codec_refine import snapshot_of
 
 __all__ = ["make_example_command"]
 
@@ -25,8 +25,7 @@ def make_example_command(args) -> int:
     from snapshot3d.viewer.demo import EXAMPLE_PHOTO, EXAMPLE_SCENE
 
     scene = load_scene_file(asset(EXAMPLE_SCENE))
-    net, host = load_codec()[0], load_host(args.host)
-    snap = refine_snapshot(net, host, scene.planes(), args.refine)[0] if args.refine else embed_planes(net, host, scene.planes())
+    snap = snapshot_of(load_codec()[0], load_host(args.host), scene.planes(), args.refine)
     preset = PRESETS[args.severity]
     preset = replace(preset, frame=(1600, 1200)) if preset.physical else preset
     data, ext, _ = simulate(render_sheet(snap, scene_meta(scene, 1.0), 4), preset, args.seed)
