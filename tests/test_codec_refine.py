@@ -38,3 +38,12 @@ def test_refined_snapshot_restores_better_at_about_the_same_host(setup):
     # measured (coffee, 25 steps): file 22.8 -> 30.4 dB, JPEG-75 copy 15.6 -> 16.4 dB
     assert _plane_psnr(net, scene, refined) >= _plane_psnr(net, scene, plain) + 4.0
     assert _plane_psnr(net, scene, _jpeg75(refined)) >= _plane_psnr(net, scene, _jpeg75(plain)) + 0.3
+
+
+def test_negative_refine_is_refused(setup):
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.codec_refine import snapshot_of
+
+    net, scene, host = setup
+    with pytest.raises(UserError, match="--refine must be >= 0"):
+        snapshot_of(net, host, scene.planes(), -1)

@@ -70,6 +70,7 @@ DISTORTIONS = {
     "blur sigma 1 px": lambda x: cv2.GaussianBlur(x, (0, 0), 1.0),
     "shift 0.25 px": lambda x: _shift(x, 0.25),
     "shift 0.5 px": lambda x: _shift(x, 0.5),
+    "shift 1 px": lambda x: _shift(x, 1.0),
 }
 
 
