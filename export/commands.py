@@ -1,7 +1,13 @@
-"""`snapshot3d export -o DIR`: the ONNX models, checked against torch on real inputs."""
+"""`snapshot3d export -o DIR` (or `--install`): the ONNX models, checked against torch on real inputs.
+
+The models are written and checked in a hidden staging folder first; only models that pass the parity
+check replace what stands in the destination (the package's shipped models with `--install`)."""
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 from snapshot3d.errors import UserError
@@ -14,17 +20,25 @@ def export_command(args) -> int:
     from .onnx_export import export_all
     from .parity import field_parity, restore_parity
 
-    out = Path(args.output) if args.output else asset()
+    out = asset() if args.install else Path(args.output)
     if out.exists() and not out.is_dir():
         raise UserError(f"{out} is a file; export writes a folder of .onnx models")
-    models = export_all(out)
-    paths = {k: v["path"] for k, v in models.items()}
-    parity = {"field": field_parity(paths["project"], paths["field"]),
-              "restore": restore_parity(paths["restore"], paths["project"], paths["field"])}
-    report = {"models": models, "parity": parity}
-    (out / "export.json").write_text(json.dumps(report, indent=2) + "\n")
-    bad = parity["field"]["views_max_abs_diff"] > 1e-3 or parity["restore"]["restore_psnr_diff_db"] > 0.05
-    print(json.dumps(parity))
-    if bad:
-        raise UserError("ONNX parity check failed: the exported models do not match torch (see export.json)")
+    out.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".export.", suffix=".partial", dir=out))
+    try:
+        models = export_all(stage)
+        paths = {k: v["path"] for k, v in models.items()}
+        parity = {"field": field_parity(paths["project"], paths["field"]),
+                  "restore": restore_parity(paths["restore"], paths["project"], paths["field"])}
+        print(json.dumps(parity))
+        if parity["field"]["views_max_abs_diff"] > 1e-3 or parity["restore"]["restore_psnr_diff_db"] > 0.05:
+            raise UserError("ONNX parity check failed: the exported models do not match torch; nothing was written")
+        for info in models.values():
+            final = out / Path(info["path"]).name
+            os.replace(info["path"], final)
+            info["path"] = final.name  # relative to export.json's folder
+        (out / "export.json").write_text(json.dumps({"models": models, "parity": parity}, indent=2) + "\n")
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    print(f"wrote {', '.join(m['path'] for m in models.values())} and export.json to {out}/")
     return 0

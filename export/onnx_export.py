@@ -12,8 +12,17 @@ import torch
 from snapshot3d import formats
 from snapshot3d.paths import model_file
 
-from .models import (FIELD_INPUTS, FIELD_OUTPUTS, PROJECT_INPUTS, PROJECT_OUTPUTS, RESTORE_INPUTS, RESTORE_OUTPUTS,
-                     FieldGraph, ProjectGraph, RestoreGraph)
+from .models import (
+    FIELD_INPUTS,
+    FIELD_OUTPUTS,
+    PROJECT_INPUTS,
+    PROJECT_OUTPUTS,
+    RESTORE_INPUTS,
+    RESTORE_OUTPUTS,
+    FieldGraph,
+    ProjectGraph,
+    RestoreGraph,
+)
 
 __all__ = ["OPSET", "MODEL_KINDS", "export_restore", "export_project", "export_field", "export_all", "model_names"]
 
@@ -79,8 +88,8 @@ def export_field(decoder, path: Path) -> int:
 
 def export_all(out: Path, log=print) -> dict:
     """Write the models into `out`; returns their paths and sizes."""
-    from snapshot3d.train.codec import load_codec
-    from snapshot3d.train.decoder import load_decoder
+    from snapshot3d.train.codec.hinet import load_codec
+    from snapshot3d.train.field.decoder import load_decoder
 
     out.mkdir(parents=True, exist_ok=True)
     names = model_names()

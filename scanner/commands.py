@@ -18,6 +18,17 @@ def _json_bytes(obj) -> bytes:
     return (json.dumps(obj, indent=2) + "\n").encode()
 
 
+def _sheet_png(path: Path) -> Path:
+    """The sheet image to photograph: the file itself, or for a .pdf the PNG `sheet` wrote beside it."""
+    if path.suffix.lower() != ".pdf":
+        return path
+    png = path.with_suffix(".png")
+    if not png.is_file():
+        raise UserError(f"simulate reads the sheet's PNG, which 'snapshot3d sheet' writes beside the PDF; "
+                        f"{png.name} not found next to {path.name}")
+    return png
+
+
 def simulate_command(args) -> int:
     from .simulate import simulate
 
@@ -27,7 +38,7 @@ def simulate_command(args) -> int:
         raise UserError(f"cannot write {out.name}: use a .jpg or .png file name")
     if args.severity == "none" and ext != ".png":
         raise UserError("severity 'none' is lossless: write the photo as .png")
-    sheet = cv2.cvtColor(read_image_bgr(args.sheet), cv2.COLOR_BGR2RGB)
+    sheet = cv2.cvtColor(read_image_bgr(_sheet_png(Path(args.sheet)), "sheet"), cv2.COLOR_BGR2RGB)
     try:
         data, kind, truth = simulate(sheet, args.severity, args.seed)
     except ValueError as e:
@@ -61,7 +72,7 @@ def draw_overlay(img_bgr: np.ndarray, result, max_side: int = 1600) -> np.ndarra
 
 
 def scan_command(args) -> int:
-    from .scan import scan_image
+    from .scan import refuse_snapshot_file, scan_image
 
     out = Path(args.output)
     if out.suffix.lower() != ".png":
@@ -70,6 +81,7 @@ def scan_command(args) -> int:
 
     t0 = time.perf_counter()
     img = read_image_bgr(args.photo)
+    refuse_snapshot_file(args.photo, img)
     dec = (time.perf_counter() - t0) * 1e3
     res = scan_image(img)
     res.timings_ms = {"decode": dec, **res.timings_ms, "total_with_decode": dec + res.timings_ms["total"]}

@@ -26,13 +26,14 @@ _MAGIC = ((b"\xff\xd8", "JPEG"), (b"\x89PNG", "PNG"), (b"GIF8", "GIF"), (b"BM", 
 _JPEG_MARKER = re.compile(rb"\xff[^\x00\xd0-\xd7\xff]")
 
 
-def image_size(path) -> tuple[int, int, str]:
-    """(width, height, format) from the file's header, without decoding pixels; UserError if not an image."""
+def image_size(path, what: str = "photo") -> tuple[int, int, str]:
+    """(width, height, format) from the file's header, without decoding pixels; UserError if not an image
+    (`what` names the file in the message: "photo", "sheet", ...)."""
     from PIL import Image
 
     path = Path(path)
     if not path.is_file():
-        raise UserError(f"photo not found: {path}")
+        raise UserError(f"{what} not found: {path}")
     if path.stat().st_size > MAX_BYTES:
         raise UserError(f"{path.name} is too large ({path.stat().st_size / 1e6:.0f} MB; limit {MAX_BYTES / 1e6:.0f} MB)")
     if path.stat().st_size == 0:
@@ -86,10 +87,11 @@ def _jpeg_complete(data: bytes) -> bool:
     return False
 
 
-def read_image_bgr(path) -> np.ndarray:
-    """Decode a photo to (H, W, 3) uint8 **BGR** (OpenCV order), EXIF orientation applied."""
+def read_image_bgr(path, what: str = "photo") -> np.ndarray:
+    """Decode an image file to (H, W, 3) uint8 **BGR** (OpenCV order), EXIF orientation applied; `what`
+    names the file in error messages."""
     path = Path(path)
-    w, h, fmt = image_size(path)
+    w, h, fmt = image_size(path, what)
     data = path.read_bytes()
     if fmt == "JPEG" and not _jpeg_complete(data):
         raise UserError(f"{path.name} is a corrupt or truncated JPEG file")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -26,7 +27,7 @@ from .pilot import pilot_psnr
 from .qr import check_codec, decode_payload, read_qr
 from .rectify import OVERSAMPLE, photo_px_per_unit, rectify_sheet
 
-__all__ = ["ScanResult", "scan_image", "scan_file", "DETECT_SIDE", "MIN_SNAPSHOT_PX", "REPORT_KEYS"]
+__all__ = ["ScanResult", "scan_image", "scan_file", "refuse_snapshot_file", "DETECT_SIDE", "MIN_SNAPSHOT_PX", "REPORT_KEYS"]
 
 DETECT_SIDE = 1400        # longest side of the detection copy (pixels)
 MIN_SNAPSHOT_PX = 380     # at least one photo pixel per snapshot pixel: below, the snapshot is aliased
@@ -222,10 +223,22 @@ def _read_qr(hi: np.ndarray, model: dict) -> dict | None:
     return meta.as_dict()
 
 
+def refuse_snapshot_file(path, img: np.ndarray) -> None:
+    """UserError with what to do instead when `img` (a decoded file) is a snapshot file, not a photo of a
+    printed sheet: a snapshot is exactly SNAPSHOT_SIZE x SNAPSHOT_SIZE."""
+    n = formats.SNAPSHOT_SIZE
+    if img.shape[:2] == (n, n):
+        name = Path(path).name
+        raise UserError(f"{name} is a {n}x{n} snapshot file, not a photo of a printed sheet: restore it with "
+                        f"'snapshot3d restore {name} -o scene.s3d', or print it with 'snapshot3d sheet {name} "
+                        f"-o sheet.pdf' and photograph the print")
+
+
 def scan_file(path) -> ScanResult:
     """Read (safely, `imageio_safe`) and scan a photo file; timings include decoding ("decode")."""
     t0 = time.perf_counter()
     img = read_image_bgr(path)
+    refuse_snapshot_file(path, img)
     dec = (time.perf_counter() - t0) * 1e3
     res = scan_image(img)
     res.timings_ms = {"decode": dec, **res.timings_ms, "total_with_decode": dec + res.timings_ms["total"]}

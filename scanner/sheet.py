@@ -19,7 +19,7 @@ from . import layout
 from .imageio_safe import read_image_bgr, write_atomic
 from .qr import SheetMeta, encode_payload, qr_matrix
 
-__all__ = ["SheetConfig", "render_sheet", "sheet_command", "meta_from_scene"]
+__all__ = ["SheetConfig", "render_sheet", "sheet_command", "meta_from_scene", "write_print_files"]
 
 
 @dataclass(frozen=True)
@@ -79,17 +79,27 @@ def meta_from_scene(path) -> SheetMeta:
                      target=tuple(float(v) for v in o.target), planes=(scene.resolution, scene.channels))
 
 
-def _write_print_file(path: Path, rgb: np.ndarray, width_mm: float) -> None:
-    """PDF with the page exactly width_mm wide, or PNG carrying the matching dpi (so it prints at size)."""
+def _png_bytes(rgb: np.ndarray, width_mm: float) -> bytes:
+    """PNG carrying the dpi that prints it `width_mm` wide."""
     from PIL import Image
 
     dpi = rgb.shape[1] / (width_mm / 25.4)
     buf = io.BytesIO()
-    if path.suffix.lower() == ".pdf":
-        Image.fromarray(rgb).save(buf, format="PDF", resolution=dpi)
-    else:
-        Image.fromarray(rgb).save(buf, format="PNG", dpi=(dpi, dpi))
-    write_atomic(path, buf.getvalue())
+    Image.fromarray(rgb).save(buf, format="PNG", dpi=(dpi, dpi))
+    return buf.getvalue()
+
+
+def write_print_files(path: Path, rgb: np.ndarray, width_mm: float) -> list[Path]:
+    """A .png sheet, or a .pdf (lossless, the page exactly width_mm wide) with the same page as .png beside
+    it (what `simulate` photographs). Returns the files written."""
+    from .pdf import pdf_bytes
+
+    png = path.with_suffix(".png")
+    write_atomic(png, _png_bytes(rgb, width_mm))
+    if path.suffix.lower() != ".pdf":
+        return [png]
+    write_atomic(path, pdf_bytes(rgb, width_mm))
+    return [path, png]
 
 
 def sheet_command(args) -> int:
@@ -100,7 +110,7 @@ def sheet_command(args) -> int:
     out = Path(args.output)
     if out.suffix.lower() not in (".png", ".pdf"):
         raise UserError(f"cannot write {out.name}: the sheet is written as .png or .pdf")
-    snap = cv2.cvtColor(read_image_bgr(args.snapshot), cv2.COLOR_BGR2RGB)
+    snap = cv2.cvtColor(read_image_bgr(args.snapshot, "snapshot"), cv2.COLOR_BGR2RGB)
     n = formats.SNAPSHOT_SIZE
     if snap.shape[:2] != (n, n):
         raise UserError(f"{Path(args.snapshot).name} is {snap.shape[1]}x{snap.shape[0]}; a snapshot is {n}x{n}")
@@ -114,8 +124,9 @@ def sheet_command(args) -> int:
             pass
     k = cfg.dots_per_pixel()
     sheet = render_sheet(snap, meta, k)
-    _write_print_file(out, sheet, cfg.width_mm)
+    files = write_print_files(out, sheet, cfg.width_mm)
     dpi = sheet.shape[1] / (cfg.width_mm / 25.4)
-    print(f"wrote {out} ({sheet.shape[1]}x{sheet.shape[0]} px, {k} dots per snapshot pixel, "
+    print(f"wrote {' and '.join(str(f) for f in files)} ({sheet.shape[1]}x{sheet.shape[0]} px, {k} dots per "
+          f"snapshot pixel, "
           f"{cfg.width_mm:g} mm wide at {dpi:.0f} dpi; snapshot {cfg.width_mm * n / layout.sheet_size()[0]:.1f} mm)")
     return 0

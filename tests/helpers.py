@@ -3,9 +3,10 @@ import subprocess
 import sys
 
 
-def run_cli(*args, timeout: int = 600):
-    """`python -m snapshot3d ARGS` in a subprocess."""
-    return subprocess.run([sys.executable, "-m", "snapshot3d", *args], capture_output=True, text=True, timeout=timeout)
+def run_cli(*args, timeout: int = 600, cwd=None):
+    """`python -m snapshot3d ARGS` in a subprocess (in folder `cwd`)."""
+    return subprocess.run([sys.executable, "-m", "snapshot3d", *args], capture_output=True, text=True, timeout=timeout,
+                          cwd=cwd)
 
 
 def assert_one_line_error(proc, match: str) -> None:

@@ -1,11 +1,11 @@
 """`--budget auto` selection and marching-cubes meshing on known inputs."""
 import numpy as np
 import pytest
+from snapshot3d.train.field.budget import choose_rung
+from snapshot3d.train.field.config import LADDER
 
 from snapshot3d.errors import UserError
 from snapshot3d.meshing import density_to_mesh, unit_grid
-from snapshot3d.train.budget import choose_rung
-from snapshot3d.train.config import LADDER
 
 
 def test_choose_smallest_rung_within_half_a_db():

@@ -78,10 +78,10 @@ def test_fit_render_mesh_end_to_end(tmp_path):
     assert set(rep) == {"field_psnr", "field_ssim", "scene_kb", "fit_seconds", "steps", "plane_res", "plane_channels"}
     assert rep["plane_res"] == 32 and rep["plane_channels"] == 4 and rep["steps"] == 120
     assert rep["field_psnr"] > 18.0 and abs(rep["scene_kb"] - (3 * 4 * 32 * 32 + 36) / formats.KB) < 0.01
-    proc = run("render", str(out), "-o", str(tmp_path / "views"), "--views", "3", "--size", "48")
+    proc = run("render", str(out), "-o", str(tmp_path / "r"), "--views", "3", "--size", "48")
     assert proc.returncode == 0, proc.stderr
-    assert sorted(p.name for p in (tmp_path / "views").iterdir()) == ["000.png", "001.png", "002.png", "contact.png",
-                                                                     "turntable.gif"]
+    assert sorted(p.name for p in (tmp_path / "r").iterdir()) == ["contact.png", "turntable.gif", "views"]
+    assert sorted(p.name for p in (tmp_path / "r" / "views").iterdir()) == ["000.png", "001.png", "002.png"]
     proc = run("mesh", str(out), "-o", str(tmp_path / "m.ply"), "--res", "48")
     assert proc.returncode == 0, proc.stderr
     import trimesh
@@ -93,3 +93,43 @@ def test_fit_render_mesh_end_to_end(tmp_path):
 def rep_box(path):
     from snapshot3d.scene import load_scene_file
     return load_scene_file(path).box
+
+
+def test_version_and_help_show_every_default():
+    """`--version`; every option of every command has help, and help shows the default where there is one."""
+    import argparse
+
+    from snapshot3d import __version__
+    from snapshot3d.cli import build_parser
+
+    proc = run("--version")
+    assert proc.returncode == 0 and proc.stdout.strip() == f"snapshot3d {__version__}"
+    parser = build_parser()
+    missing, commands = [], 0
+
+    def walk(p, path):
+        nonlocal commands
+        for action in p._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    walk(sub, f"{path} {name}")
+            elif action.option_strings and action.dest not in ("help", "version"):
+                text = p.formatter_class(path)._get_help_string(action) or ""
+                if not text.strip() or (action.default not in (None, False) and "%(default)" not in text):
+                    missing.append(f"{path} {action.option_strings[-1]}")
+        commands += 1
+    walk(parser, "snapshot3d")
+    assert commands > 20 and not missing, missing
+    embed_help = build_parser().parse_args(["embed", "x.s3d", "-o", "y.png"])  # parses; hosts listed in help
+    assert embed_help.host == "builtin:coffee"
+    proc = run("embed", "--help")
+    assert "builtin:NAME" in proc.stdout and "chelsea" in proc.stdout and "(default: 100)" in proc.stdout
+
+
+def test_export_and_make_example_need_a_destination(tmp_path):
+    """They never overwrite the shipped assets unless told to (--install)."""
+    for cmd in ("export", "make-example"):
+        proc = run(cmd)
+        assert proc.returncode == 2 and "one of the arguments -o/--output --install is required" in proc.stderr
+        proc = run(cmd, "-o", str(tmp_path / "x"), "--install")
+        assert proc.returncode == 2 and "not allowed with argument" in proc.stderr

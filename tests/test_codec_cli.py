@@ -7,11 +7,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from helpers import assert_one_line_error, run_cli
 
 from snapshot3d import formats
 from snapshot3d.scene import Orbit, Scene, load_scene_file, save_scene
-
-from helpers import assert_one_line_error, run_cli
 
 SPOT = Path(str(resources.files("snapshot3d") / "assets" / "spot.s3d"))
 

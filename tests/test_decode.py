@@ -8,7 +8,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import trimesh
-
 from helpers import assert_one_line_error, run_cli
 from test_torch_free import BLOCKER
 
@@ -84,11 +83,12 @@ def test_embed_sheet_simulate_decode_end_to_end(tmp_path):
     assert proc.returncode == 0, proc.stderr
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     assert rep["planes"] == [64, 8] and rep["scan"]["qr"]["codec"] == "hinet-1"
+    from snapshot3d.viewer.render import render_views
+    from snapshot3d.viewer.runtime import field_models
+
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.metrics import psnr
     from snapshot3d.scene import load_scene_file
-    from snapshot3d.viewer.render import render_views
-    from snapshot3d.viewer.runtime import field_models
     back, orig = load_scene_file(tmp_path / "out" / "scene.s3d"), load_scene_file(ASSETS / "spot.s3d")
     np.testing.assert_allclose(back.box, orig.box, rtol=1e-3)
     c2w, intr = orbit_cameras(orig.orbit, 3, 64)

@@ -5,15 +5,20 @@ import numpy as np
 import onnx
 import onnxruntime as ort
 import torch
-
-from snapshot3d import formats
-from snapshot3d.export.onnx_export import OPSET, export_field, export_project, export_restore
+from snapshot3d.export.onnx_export import (
+    OPSET,
+    export_field,
+    export_project,
+    export_restore,
+)
 from snapshot3d.export.parity import field_parity, restore_parity, torch_field_models
-from snapshot3d.train.codec import load_codec
-from snapshot3d.train.decoder import load_decoder
-from snapshot3d.train.field import decode, sample_planes
+from snapshot3d.train.codec.hinet import load_codec
+from snapshot3d.train.field.decoder import load_decoder
+from snapshot3d.train.field.field import decode, sample_planes
 from snapshot3d.viewer.bake import cell_coords, grid_field
 from snapshot3d.viewer.runtime import FieldModels
+
+from snapshot3d import formats
 
 
 def _export_field_models(tmp_path):

@@ -1,11 +1,18 @@
 """The field's functional core: compositing, plane sampling, ray-box clipping, empty-space skipping."""
 import numpy as np
 import torch
+from snapshot3d.train.field.field import (
+    Decoder,
+    TriPlanes,
+    composite,
+    decode,
+    sample_planes,
+    straight_through_8bit,
+)
+from snapshot3d.train.field.render import occupancy_from_planes, render_rays
+from snapshot3d.train.field.sampler import BoxFrame, march, ray_box
 
 from snapshot3d import formats
-from snapshot3d.train.field import Decoder, TriPlanes, composite, decode, sample_planes, straight_through_8bit
-from snapshot3d.train.render import occupancy_from_planes, render_rays
-from snapshot3d.train.sampler import BoxFrame, march, ray_box
 
 
 def test_transmittance_cumsum_equals_cumprod():

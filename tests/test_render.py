@@ -5,24 +5,32 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from snapshot3d.viewer.bake import (
+    Baked,
+    _atlas,
+    bake_field,
+    dilate3,
+    erode3,
+    interp_matrix,
+    sample_baked,
+)
+from snapshot3d.viewer.march import Frame
+from snapshot3d.viewer.render import RenderConfig, composite, pad_planes, render_views
+from snapshot3d.viewer.runtime import field_models
 
 from snapshot3d import formats
 from snapshot3d.cameras import orbit_cameras
 from snapshot3d.metrics import psnr
 from snapshot3d.scene import load_scene_file
-from snapshot3d.viewer.bake import Baked, _atlas, bake_field, dilate3, erode3, interp_matrix, sample_baked
-from snapshot3d.viewer.march import Frame
-from snapshot3d.viewer.render import RenderConfig, composite, pad_planes, render_views
-from snapshot3d.viewer.runtime import field_models
 
 SPOT = Path(str(resources.files("snapshot3d") / "assets")) / "spot.s3d"
 
 
 def test_fast_renderer_matches_reference_renderer():
     """Spot's views through the baked renderer against the reference (torch, fixed steps)."""
-    from snapshot3d.train.commands import render_scene
+    from snapshot3d.train.field.commands import render_scene
     scene = load_scene_file(SPOT)
-    ref = render_scene(scene, 3, 96, progress=False)
+    ref = render_scene(scene, 3, 96, show_progress=False)
     c2w, intr = orbit_cameras(scene.orbit, 3, 96)
     got = render_views(field_models(), scene.planes(), scene.box, c2w, intr, 96, 96)
     assert got.shape == (3, 96, 96, 3) and got.dtype == np.float32
@@ -31,9 +39,9 @@ def test_fast_renderer_matches_reference_renderer():
 
 def test_fewer_samples_and_coarser_bake_cost_accuracy():
     """The settings trade accuracy as the chart says: more samples and a finer bake are closer."""
-    from snapshot3d.train.commands import render_scene
+    from snapshot3d.train.field.commands import render_scene
     scene = load_scene_file(SPOT)
-    ref = render_scene(scene, 2, 96, progress=False)
+    ref = render_scene(scene, 2, 96, show_progress=False)
     c2w, intr = orbit_cameras(scene.orbit, 2, 96)
     score = {}
     for name, cfg in {"default": RenderConfig(), "few": RenderConfig(samples=4), "coarse": RenderConfig(bake=32)}.items():

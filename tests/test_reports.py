@@ -3,7 +3,7 @@ import csv
 import json
 import os
 
-from snapshot3d.reports import write_report
+from snapshot3d.bench.common import write_report
 
 
 def test_write_report_csv_and_json(tmp_path):

@@ -9,16 +9,16 @@ import zlib
 import cv2
 import numpy as np
 import pytest
-
-from snapshot3d import formats
-from snapshot3d.builtin import shared_data_dir
-from snapshot3d.errors import UserError
-from snapshot3d.metrics import psnr
 from snapshot3d.scanner.detect import detect_markers
 from snapshot3d.scanner.qr import SheetMeta
 from snapshot3d.scanner.scan import REPORT_KEYS, scan_image
 from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
+
+from snapshot3d import formats
+from snapshot3d.builtin import shared_data_dir
+from snapshot3d.errors import UserError
+from snapshot3d.metrics import psnr
 
 N = formats.SNAPSHOT_SIZE
 
@@ -204,7 +204,13 @@ def test_cli_simulate_and_sheet_errors(tmp_path, sheet):
 def test_lens_distortion_is_estimated():
     """Marker corners bent by a radial lens: the fit finds k1 and puts the snapshot's corners back."""
     from snapshot3d.scanner import layout
-    from snapshot3d.scanner.camera import Camera, apply_h, distort, rotation, sheet_homography
+    from snapshot3d.scanner.camera import (
+        Camera,
+        apply_h,
+        distort,
+        rotation,
+        sheet_homography,
+    )
     from snapshot3d.scanner.fit import fit_geometry
     W, H = 4000, 3000
     cam = Camera(W, H, f=0.5 * np.hypot(W, H), cx=(W - 1) / 2, cy=(H - 1) / 2, k1=-0.12)
@@ -246,3 +252,30 @@ def test_one_misplaced_marker_is_dropped(sheet, snapshot):
     res = scan_image(bgr)
     assert res.markers == [0, 1, 3] and 0.7 < res.confidence < 0.8
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) >= 40.0
+
+
+def test_snapshot_file_given_to_scan_or_decode_says_what_to_do(tmp_path):
+    from helpers import assert_one_line_error, run_cli
+
+    snap = tmp_path / "snap.png"
+    cv2.imwrite(str(snap), np.full((formats.SNAPSHOT_SIZE, formats.SNAPSHOT_SIZE, 3), 128, np.uint8))
+    for cmd in ("scan", "decode"):
+        out = tmp_path / ("o.png" if cmd == "scan" else "out")
+        proc = run_cli(cmd, str(snap), "-o", str(out))
+        assert_one_line_error(proc, "is a 380x380 snapshot file, not a photo of a printed sheet")
+        assert "snapshot3d restore snap.png" in proc.stderr and not out.exists()
+
+
+def test_simulate_reads_the_pdf_through_the_png_beside_it(tmp_path):
+    from helpers import assert_one_line_error, run_cli
+
+    snap = tmp_path / "snap.png"
+    cv2.imwrite(str(snap), np.full((formats.SNAPSHOT_SIZE, formats.SNAPSHOT_SIZE, 3), 128, np.uint8))
+    assert run_cli("sheet", str(snap), "-o", str(tmp_path / "sheet.pdf")).returncode == 0
+    proc = run_cli("simulate", str(tmp_path / "sheet.pdf"), "-o", str(tmp_path / "a.jpg"), "--severity", "jpeg90")
+    assert proc.returncode == 0, proc.stderr
+    (tmp_path / "sheet.png").unlink()
+    proc = run_cli("simulate", str(tmp_path / "sheet.pdf"), "-o", str(tmp_path / "b.jpg"))
+    assert_one_line_error(proc, "sheet.png not found next to sheet.pdf")
+    proc = run_cli("simulate", str(tmp_path / "nothing.png"), "-o", str(tmp_path / "c.jpg"))
+    assert_one_line_error(proc, "sheet not found")

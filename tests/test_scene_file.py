@@ -5,7 +5,14 @@ import pytest
 
 from snapshot3d import formats
 from snapshot3d.errors import UserError
-from snapshot3d.scene import Orbit, Scene, dequantize_planes, load_scene_file, quantize_planes, save_scene
+from snapshot3d.scene import (
+    Orbit,
+    Scene,
+    dequantize_planes,
+    load_scene_file,
+    quantize_planes,
+    save_scene,
+)
 
 
 def _scene(rng, c=8, r=16, decoder=formats.DECODER_VERSION):

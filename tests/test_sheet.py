@@ -5,12 +5,13 @@ import sys
 import cv2
 import numpy as np
 import pytest
-
-from snapshot3d import formats
 from snapshot3d.scanner import layout
+from snapshot3d.scanner.pdf import pdf_image
 from snapshot3d.scanner.detect import detect_markers
 from snapshot3d.scanner.qr import SheetMeta, decode_payload, encode_payload, read_qr
 from snapshot3d.scanner.sheet import render_sheet
+
+from snapshot3d import formats
 
 
 def _snapshot():
@@ -78,17 +79,21 @@ def test_payload_rejects_foreign_text():
 def test_sheet_cli_png_pdf(tmp_path):
     snap = tmp_path / "snap.png"
     cv2.imwrite(str(snap), _snapshot())
-    for name, width, dpi in (("s.png", 100, 300), ("s.pdf", 150, 300)):
+    for name, width, dpi in (("s.png", 100, 300), ("p.pdf", 150, 300)):
         proc = subprocess.run([sys.executable, "-m", "snapshot3d", "sheet", str(snap), "-o", str(tmp_path / name),
                                "--width-mm", str(width), "--dpi", str(dpi)], capture_output=True, text=True)
         assert proc.returncode == 0, proc.stderr
     png = cv2.imread(str(tmp_path / "s.png"))
     assert png.shape[1] == layout.sheet_size()[0] * round(100 / 25.4 * 300 / layout.sheet_size()[0])
-    pdf = (tmp_path / "s.pdf").read_bytes()
+    pdf = (tmp_path / "p.pdf").read_bytes()
     assert pdf.startswith(b"%PDF")
     # page width in points (1/72 inch) = 150 mm
     media = pdf[pdf.index(b"/MediaBox"):][:80].split(b"[")[1].split(b"]")[0].split()
     assert abs(float(media[2]) / 72 * 25.4 - 150) < 0.5
+    # the PDF holds the page losslessly, and the same page is written beside it as PNG (what simulate reads)
+    beside = cv2.cvtColor(cv2.imread(str(tmp_path / "p.png")), cv2.COLOR_BGR2RGB)
+    assert np.array_equal(pdf_image(pdf), beside)
+    assert beside.shape[1] == layout.sheet_size()[0] * round(150 / 25.4 * 300 / layout.sheet_size()[0])
     bad = tmp_path / "small.png"
     cv2.imwrite(str(bad), np.zeros((100, 120, 3), np.uint8))
     proc = subprocess.run([sys.executable, "-m", "snapshot3d", "sheet", str(bad), "-o", str(tmp_path / "x.png")],

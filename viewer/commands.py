@@ -1,20 +1,22 @@
 """`snapshot3d decode PHOTO -o OUT`: views, turntable, contact sheet, report (and a mesh); no torch.
 
-Everything is written into a hidden sibling folder first and moved into place at the end, so that an
-interrupted or failed decode never leaves a half-written OUT."""
+Everything is written into a hidden sibling folder first and moved into place at the end
+(`snapshot3d.outputs`), so that an interrupted or failed decode never leaves a half-written OUT."""
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from snapshot3d.errors import UserError
 from snapshot3d.images import contact_sheet, write_gif, write_png, write_views
+from snapshot3d.outputs import staged_folder
 
-__all__ = ["decode_command", "write_outputs", "decoded_mesh"]
+__all__ = ["decode_command", "write_outputs", "decoded_mesh", "POOR_DB"]
+
+POOR_DB = 22.0
+"""below this expected restore_psnr, decode warns that the views will be poor"""
 
 
 def decoded_mesh(baked, box):
@@ -40,41 +42,41 @@ def write_outputs(folder: Path, views: np.ndarray, report: dict, mesh=None) -> N
     (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
 
 
-def _publish(tmp: Path, out: Path) -> None:
-    if out.exists():
-        if not out.is_dir():
-            raise UserError(f"{out} exists and is not a folder")
-        old = out.with_name(f".{out.name}.old")
-        shutil.rmtree(old, ignore_errors=True)
-        out.rename(old)
-        tmp.rename(out)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        tmp.rename(out)
+def _quality_lines(q: dict) -> list[str]:
+    """What decode says about the views' expected quality (one or two lines)."""
+    expected = q.get("restore_psnr_expected_db")
+    if expected is None:
+        return [f"quality estimate: none (no calibration shipped); markers pilot_psnr {q['pilot_psnr_db']:.1f} dB"]
+    lines = [f"quality estimate: restore_psnr about {expected:.1f} dB (from the sheet's markers, "
+             f"typical error {q['calibration']['held_out_rmse_db']:.1f} dB)"]
+    if expected < POOR_DB:
+        lines.append("warning: the views will be poor (blurred or wrong shapes): retake the photo with even light, "
+                     "in focus, square on, and print the sheet larger")
+    return lines
 
 
 def decode_command(args) -> int:
+    from snapshot3d.progress import progress
+    from snapshot3d.scene import save_scene
+
     from .decode import decode_photo
     from .render import RenderConfig
 
     if not 1 <= args.views <= 360 or not 16 <= args.size <= 2048:
         raise UserError("--views must be in 1..360 and --size in 16..2048")
-    if args.samples is not None and args.samples < 1:
+    if args.samples < 1:
         raise UserError("--samples must be >= 1")
-    out = Path(args.output)
-    dec = decode_photo(args.photo, args.views, args.size, RenderConfig(**({"samples": args.samples} if args.samples else {})))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
-    try:
+    with progress(args.views, "decode", unit="view") as bar:
+        dec = decode_photo(args.photo, args.views, args.size, RenderConfig(samples=args.samples),
+                           on_view=lambda i: bar.update(1))
+    with staged_folder(args.output) as tmp:
         mesh = decoded_mesh(dec.baked, dec.scene.box) if args.mesh else None
         write_outputs(tmp, dec.views, dec.report, mesh)
-        from snapshot3d.scene import save_scene
         save_scene(dec.scene, tmp / "scene.s3d")
-        _publish(tmp, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     r = dec.report
     print(f"decoded {args.photo}: {len(dec.views)} views of {args.size}x{args.size} in {r['decode_ms']:.0f} ms "
           f"(scan {r['timings_ms']['scan']:.0f}, restore {r['timings_ms']['restore']:.0f}, render "
-          f"{r['timings_ms']['render']:.0f}); wrote {out}/")
+          f"{r['timings_ms']['render']:.0f}); wrote {args.output}/")
+    for line in _quality_lines(r["quality_estimate"]):
+        print(line)
     return 0

@@ -17,9 +17,9 @@ from snapshot3d.errors import UserError
 from snapshot3d.scene import Orbit, Scene, dequantize_planes, quantize_planes
 
 from .bake import Baked, bake_field
-from .render import RenderConfig, pad_planes, render_views
 from .march import Frame
 from .quality import quality_estimate
+from .render import RenderConfig, pad_planes, render_views
 from .runtime import field_models, model_path, session
 
 __all__ = ["Decoded", "decode_photo", "restore_planes", "scene_from_meta"]

@@ -17,9 +17,9 @@ EXAMPLE_SCENE = "spot.s3d"
 
 
 def demo_command(args) -> int:
-    from .commands import write_outputs
     from snapshot3d.cameras import orbit_cameras
 
+    from .commands import write_outputs
     from .decode import decode_photo
     from .render import render_views
     from .runtime import field_models

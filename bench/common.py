@@ -1,0 +1,120 @@
+"""What every benchmark shares: the report writer (CSV rows, JSON summary with the command and the core
+count), the channel a snapshot goes through (`simulate` + `scan`), the judge that scores restored planes
+by their orbit views, medians, and matplotlib set up for files (Agg).
+
+Images: snapshots (380, 380, 3) uint8 RGB; views (N, H, W, 3) float32 RGB in [0, 1]."""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+from snapshot3d.metrics import psnr as _psnr
+
+__all__ = ["SEVERITIES", "PHYSICAL", "write_report", "write_rows", "psnr", "median", "capture_seeds",
+           "through_channel", "ViewJudge", "pyplot", "bench_progress"]
+
+SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")
+PHYSICAL = ("mild", "moderate", "severe")
+
+
+def write_rows(path: Path, rows: list[dict], fields: list[str] | None = None) -> None:
+    """CSV of `rows`; columns `fields` (default: the union of the rows' keys, in first-seen order)."""
+    fields = fields or list(dict.fromkeys(k for r in rows for k in r))
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+
+
+def write_report(out: Path, stem: str, rows: list[dict], doc: dict) -> dict:
+    """Write out/stem.csv (rows) and out/stem.json (`doc` after "command" and "cores"); returns the JSON
+    document."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_rows(out / f"{stem}.csv", rows)
+    doc = {"command": "snapshot3d " + " ".join(sys.argv[1:]), "cores": os.cpu_count(), **doc}
+    (out / f"{stem}.json").write_text(json.dumps(doc, indent=2) + "\n")
+    return doc
+
+
+def psnr(a, b) -> float:
+    """PSNR capped at 100 dB (an exact copy), so that reports stay valid JSON."""
+    return float(min(_psnr(a, b), 100.0))
+
+
+def median(rows: list[dict], key: str) -> float | None:
+    """Median of `key` over the rows that have a value for it (None when none has)."""
+    vals = [r[key] for r in rows if r.get(key) not in (None, "")]
+    return float(np.median(vals)) if vals else None
+
+
+def capture_seeds(severity: str, seeds: int):
+    """Seeds to capture a severity with: `seeds` photos for the physical ones, one for the digital ones
+    (a JPEG file or a lossless copy does not depend on the seed)."""
+    return range(seeds) if severity in PHYSICAL else [0]
+
+
+def through_channel(snap: np.ndarray, meta, severity: str, seed: int, dots: int = 4) -> np.ndarray | None:
+    """snapshot (380, 380, 3) uint8 RGB -> the rectified snapshot `scan` gives from a simulated photo of
+    its sheet (drawn at `dots` dots per snapshot pixel), or None when the sheet is not found."""
+    from snapshot3d.scanner.scan import scan_image
+    from snapshot3d.scanner.sheet import render_sheet
+    from snapshot3d.scanner.simulate import simulate
+
+    data, _, _ = simulate(render_sheet(snap, meta, dots), severity, seed)
+    try:
+        return scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+    except UserError:
+        return None
+
+
+class ViewJudge:
+    """Renders the orbit views of planes (torch reference renderer) and scores them against the original
+    scene's: `restore_psnr` of restored planes."""
+
+    def __init__(self, scene, size: int):
+        from snapshot3d.train.field.decoder import load_decoder
+
+        from snapshot3d.cameras import orbit_cameras
+
+        self.scene, self.size, self.decoder = scene, size, load_decoder()
+        self.cams = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
+        self.ref = self.views(scene.planes())
+
+    def views(self, planes: np.ndarray) -> np.ndarray:
+        import torch
+        from snapshot3d.train.field.render import render_views
+        return render_views(torch.from_numpy(np.ascontiguousarray(planes, np.float32)), self.decoder, self.scene.box,
+                            *self.cams, self.size, self.size)
+
+    def planes_psnr(self, planes: np.ndarray) -> float:
+        """restore_psnr of planes (3, C, R, R), carried as 8-bit codes."""
+        from snapshot3d.scene import dequantize_planes, quantize_planes
+        return psnr(self.views(dequantize_planes(quantize_planes(planes))), self.ref)
+
+    def restore_psnr(self, secret: np.ndarray) -> float:
+        """restore_psnr of the file codec's restored secret (24, G, G)."""
+        from snapshot3d import codec_layout
+        return self.planes_psnr(codec_layout.secret_to_planes(secret, self.scene.resolution, self.scene.channels))
+
+
+def pyplot():
+    """matplotlib.pyplot drawing to files (the Agg backend), imported on first use."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def bench_progress(total: int, desc: str):
+    """A progress bar (`snapshot3d.progress`) for a benchmark's `total` units of work."""
+    from snapshot3d.progress import progress
+    return progress(total, desc, unit="run")

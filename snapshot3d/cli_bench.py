@@ -1,0 +1,107 @@
+"""Options of the `snapshot3d bench ...` commands. Option definitions only: the benchmarks themselves
+live in `snapshot3d.bench` and are imported when a command runs (the product never imports them)."""
+from __future__ import annotations
+
+from .lazy import lazy_command as _run
+
+__all__ = ["add_bench_commands"]
+
+_SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")
+
+
+def _out(p) -> None:
+    p.add_argument("--out", default=None, help="output folder (default: bench/results, or bench/results/quick "
+                                               "with --quick, so that a smoke run never overwrites the results)")
+
+
+def _quick(p, **settings) -> None:
+    """--quick: a smoke run of the benchmark with `settings` in place of the options given."""
+    desc = ", ".join(f"--{k.replace('_', '-')} {v}" for k, v in settings.items())
+    p.add_argument("--quick", action="store_true", help=f"a smoke run ({desc})" if desc else "a smoke run")
+    run = p.get_default("func")
+    p.set_defaults(func=lambda args: run(_resolved(args, settings)))
+
+
+def _resolved(args, settings: dict):
+    if args.quick:
+        for k, v in settings.items():
+            setattr(args, k, v)
+    if args.out is None:
+        args.out = "bench/results/quick" if args.quick else "bench/results"
+    return args
+
+
+def add_bench_commands(bsub, add) -> None:
+    """Add every benchmark to the `bench` subparsers `bsub`; `add(sub, name, help, func)` makes a parser."""
+    bf = add(bsub, "fit", "field_psnr against scene_kb and fit time, spot and lego; training throughput",
+             _run("snapshot3d.bench.fit", "bench_fit_command"))
+    _out(bf)
+    _quick(bf)
+    bf.add_argument("--scenes", default="spot,lego", help="comma-separated bench scenes; a subset writes fit_<names>.*")
+    bf.add_argument("--merge", action="store_true", help="only combine fit_<scene>.json files into fit.*")
+
+    bs = add(bsub, "scan", "scanner on simulated photos: detection, corner error, PSNR, speed; charts",
+             _run("snapshot3d.bench.scan", "bench_scan_command"))
+    _out(bs)
+    bs.add_argument("--seeds", type=int, default=200, help="simulated photos per severity for mild and moderate")
+    bs.add_argument("--severe-seeds", type=int, default=100, help="simulated severe photos")
+    bs.add_argument("--negatives", type=int, default=50, help="photos with no sheet")
+    bs.add_argument("--timing-runs", type=int, default=30, help="repeated scans of one 12 MP photo for the time median")
+    _quick(bs, seeds=2, severe_seeds=2, negatives=2, timing_runs=2)
+
+    bh = add(bsub, "channel", "what scan leaves of a printed snapshot, as the codec channel's parameters",
+             _run("snapshot3d.bench.channel", "bench_channel_command"))
+    _out(bh)
+    bh.add_argument("--seeds", type=int, default=8, help="simulated photos per severity")
+    bh.add_argument("--severities", default="jpeg75,mild,moderate,severe", help="comma-separated severities")
+    _quick(bh, seeds=1)
+
+    bc = add(bsub, "codec", "host fidelity vs restore_psnr through simulate+scan; baselines; charts",
+             _run("snapshot3d.bench.codec", "bench_codec_command"))
+    _out(bc)
+    bc.add_argument("--scenes", default="snapshot3d/assets/spot.s3d,cache/scenes/lego.s3d",
+                    help="comma-separated scene files to evaluate (spot is never trained on)")
+    bc.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from training)")
+    bc.add_argument("--headline", default="spot,lego", help="scenes (file stems) the summary's medians are over")
+    bc.add_argument("--seeds", type=int, default=3, help="simulated photos per physical severity")
+    bc.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
+    bc.add_argument("--refine", type=int, default=100, help="embed-time refinement steps of the ours-refined rows "
+                                                           "and the side-by-side figure (0: neither)")
+    bc.add_argument("--strengths", default="0.5,0.75,1,1.5,2", help="embedding strengths of the trade-off sweep")
+    bc.add_argument("--digital", default="bench/models/codec-digital.npz",
+                    help="baseline a: the codec trained without the channel")
+    _quick(bc, scenes="snapshot3d/assets/spot.s3d", hosts="coffee", seeds=1, size=48, refine=5, strengths="1")
+
+    bj = add(bsub, "codec-jpeg", "restore_psnr of a snapshot file through JPEG (4:2:0, 4:4:4), chroma "
+                                 "subsampling, noise, blur and sub-pixel shifts, one at a time",
+             _run("snapshot3d.bench.codec_jpeg", "bench_codec_jpeg_command"))
+    _out(bj)
+    bj.add_argument("--compare", default=None, help="another codec weights file measured beside the shipped one")
+    bj.add_argument("--refine", type=int, default=100, help="also the shipped codec's snapshots refined this many "
+                                                           "steps at embed time (0: not)")
+    _quick(bj, refine=5)
+
+    bq = add(bsub, "capacity", "the capture channel's Gaussian capacity per severity and the best restore_psnr "
+                               "it allows, beside the shipped codec's, per plane size",
+             _run("snapshot3d.bench.capacity", "bench_capacity_command"))
+    _out(bq)
+    bq.add_argument("--scenes", default="snapshot3d/assets/spot.s3d,bench/models/spot-r48c4.s3d,bench/models/spot-r32c4.s3d",
+                    help="comma-separated scene files (spot fitted at several plane sizes)")
+    bq.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from training)")
+    bq.add_argument("--seeds", type=int, default=3, help="simulated photos per physical severity")
+    bq.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
+    _quick(bq, scenes="snapshot3d/assets/spot.s3d", hosts="coffee", seeds=1, size=48)
+
+    bd = add(bsub, "decode", "torch-free decode of simulated photos: decode_ms per stage, restore_psnr, e2e_psnr; "
+                             "a speed/accuracy sweep and its chart; the quality estimate's calibration",
+             _run("snapshot3d.bench.decode", "bench_decode_command"))
+    _out(bd)
+    bd.add_argument("--seeds", type=int, default=20, help="simulated photos")
+    bd.add_argument("--severity", default="moderate", choices=_SEVERITIES, help="simulated print-and-capture severity")
+    bd.add_argument("--host", default="chelsea", help="bundled host photo (held out from codec training)")
+    bd.add_argument("--sweep-severity", default="jpeg90", choices=_SEVERITIES, help="capture the settings sweep runs on")
+    bd.add_argument("--repeats", type=int, default=3, help="timed decodes per sweep setting (median)")
+    bd.add_argument("--calib-seeds", type=int, default=4, help="captures per severity for the quality estimate's line")
+    bd.add_argument("--calibration", default=None,
+                    help="where to write that line (default: the package's file, which decode reads)")
+    _quick(bd, seeds=2, repeats=1, calib_seeds=1, calibration="bench/results/quick/quality-calibration.json")

@@ -1,0 +1,192 @@
+"""The torch-side commands: `fit`, `render`, `mesh`, `train decoder`, `demo`. Each takes parsed CLI
+arguments, prints a short summary and returns an exit code; user mistakes raise `UserError`."""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from snapshot3d import formats
+from snapshot3d.cameras import orbit_cameras as _orbit_cameras
+from snapshot3d.errors import UserError
+from snapshot3d.images import contact_sheet, write_gif, write_png, write_views
+from snapshot3d.outputs import staged_folder
+from snapshot3d.progress import progress
+from snapshot3d.reports import write_json
+from snapshot3d.scene import Orbit, Scene, load_scene_file, save_scene
+
+from .config import FitConfig, check_fit_config
+from .decoder import load_decoder
+
+__all__ = ["fit_scene", "fit_command", "render_command", "mesh_command", "train_decoder_command", "orbit_cameras",
+           "render_scene"]
+
+
+def _bar(desc: str, total: int):
+    bar = progress(total, desc)
+
+    def update(step, psnr):
+        bar.n = step
+        bar.set_postfix_str(f"psnr {psnr:.2f} dB", refresh=False)
+        bar.refresh()
+        if step >= total:
+            bar.close()
+    return update
+
+
+def orbit_cameras(scene: Scene, views: int, size: int):
+    """c2w (views, 4, 4), intrinsics (views, 4) of the scene's orbit at `size` x `size` pixels."""
+    return _orbit_cameras(scene.orbit, views, size)
+
+
+def _default_orbit(posed) -> Orbit:
+    """Radius so the scene box fills the orbit's field of view, aimed at the box centre."""
+    centre = posed.box.mean(0)
+    half_diag = float(np.linalg.norm(posed.box[1] - posed.box[0]) / 2)
+    radius = half_diag / np.sin(np.deg2rad(formats.ORBIT_FOV_DEG) / 2) * 0.9
+    return Orbit(radius=round(radius, 4), target=tuple(float(x) for x in centre))
+
+
+def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int = 1, checkpoint=None,
+              size: int = 200, quiet: bool = False, device=None):
+    """Load, fit (on `device`, None: the CPU) and evaluate. Returns (Scene, report dict, held-out renders)."""
+    from snapshot3d.loaders import load_scene
+    from snapshot3d.scene import dequantize_planes
+
+    from .budget import fit_ladder
+    from .evaluate import evaluate_planes
+    from .fit import fit
+
+    posed = load_scene(spec, downscale=downscale, size=size) if spec.startswith("builtin:") else \
+        load_scene(spec, downscale=downscale)
+    if posed.skipped and not quiet:
+        print(f"{posed.name}: {posed.skipped} listed frames have no image and were skipped")
+    decoder = load_decoder().to(device or "cpu")
+    t0 = time.perf_counter()
+    log = (lambda *_: None) if quiet else print
+    bars = None if quiet else _bar
+    report = {}
+    if budget == "auto":
+        chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device)
+        codes = rungs[chosen]["codes"]
+        ev = {k: rungs[chosen][k] for k in ("field_psnr", "field_ssim")}
+        steps = cfg.steps
+        ev["renders"] = None
+        report["ladder"] = [{k: r[k] for k in ("plane_res", "plane_channels", "scene_kb", "field_psnr", "fit_seconds")}
+                            for r in rungs]
+    elif budget == "fixed":
+        res = fit(posed, decoder, cfg, checkpoint=checkpoint, progress=bars("fit", cfg.steps) if bars else None,
+                  device=device)
+        codes, steps = res.codes, cfg.steps
+        ev = evaluate_planes(dequantize_planes(codes), decoder, posed)
+        report["_throughput"] = {"rays_per_s": res.state.rays / max(res.seconds, 1e-9),
+                                 "samples_per_s": res.state.samples / max(res.seconds, 1e-9)}
+    else:
+        raise UserError(f"--budget must be 'fixed' or 'auto', not {budget!r}")
+    seconds = time.perf_counter() - t0
+    scene = Scene(codes=codes, box=posed.box, orbit=_default_orbit(posed), name=posed.name,
+                  meta={"source": spec, "train_views": int(len(posed.train)), "test_views": int(len(posed.test))})
+    report = {"field_psnr": round(float(ev["field_psnr"]), 3), "field_ssim": round(float(ev["field_ssim"]), 4),
+              "scene_kb": round(scene.scene_kb, 2), "fit_seconds": round(seconds, 1), "steps": steps,
+              "plane_res": scene.resolution, "plane_channels": scene.channels, **report}
+    return scene, report, ev["renders"]
+
+
+def fit_command(args) -> int:
+    cfg = check_fit_config(FitConfig(**{k: getattr(args, k) for k in FitConfig.__dataclass_fields__}))
+    out = Path(args.output)
+    if out.suffix != ".s3d":
+        raise UserError(f"{out}: the scene file must end in .s3d")
+    ckpt = out.with_name(out.name + ".ckpt") if args.budget == "fixed" else None
+    if ckpt is not None and ckpt.exists() and not args.resume:
+        ckpt.unlink()
+    from ..device import resolve_device
+
+    scene, report, _ = fit_scene(args.scene, cfg, args.budget, args.downscale, ckpt, size=args.size,
+                                 device=resolve_device(args.device))
+    throughput = report.pop("_throughput", None)
+    save_scene(scene, out)
+    if ckpt is not None and ckpt.exists():
+        ckpt.unlink()
+    write_json(args.report, report)
+    extra = f", {throughput['rays_per_s']:.0f} rays/s" if throughput else ""
+    print(f"wrote {out}: field_psnr {report['field_psnr']:.2f} dB, field_ssim {report['field_ssim']:.3f}, "
+          f"{report['scene_kb']:.1f} kB (R={scene.resolution}, C={scene.channels}), {report['fit_seconds']:.0f} s{extra}")
+    return 0
+
+
+def render_scene(scene: Scene, views: int, size: int, show_progress: bool = True) -> np.ndarray:
+    """The scene's orbit views (views, size, size, 3) float32 RGB in [0, 1] (torch reference renderer)."""
+    from .render import render_views
+    c2w, intr = orbit_cameras(scene, views, size)
+    bar = progress(views, "render", unit="view") if show_progress else None
+    out = render_views(torch.from_numpy(scene.planes()), load_decoder(scene.decoder_version), scene.box, c2w, intr,
+                       size, size, progress=(lambda i: bar.update(1)) if bar else None)
+    if bar:
+        bar.close()
+    return out
+
+
+def render_command(args) -> int:
+    scene = load_scene_file(args.scene)
+    if args.views < 1 or args.size < 8:
+        raise UserError("--views must be >= 1 and --size >= 8")
+    views = render_scene(scene, args.views, args.size)
+    out = Path(args.output)
+    with staged_folder(out) as tmp:
+        write_views(tmp / "views", views)
+        write_gif(tmp / "turntable.gif", views)
+        write_png(tmp / "contact.png", contact_sheet(views))
+    print(f"wrote {len(views)} views of {args.size}x{args.size} (views/000.png ...), turntable.gif and contact.png "
+          f"to {out}/")
+    return 0
+
+
+def mesh_command(args) -> int:
+    from snapshot3d.meshing import density_to_mesh, unit_grid, write_mesh
+
+    from .field import decode, sample_planes
+    from .sampler import BoxFrame
+
+    scene = load_scene_file(args.scene)
+    if args.res < 8:
+        raise UserError("--res must be >= 8")
+    if not str(args.output).lower().endswith((".glb", ".ply")):
+        raise UserError(f"{args.output}: mesh output must end in .glb or .ply")
+    decoder = load_decoder(scene.decoder_version)
+    planes = torch.from_numpy(scene.planes())
+    pts = torch.from_numpy(unit_grid(args.res))
+    chunks = pts.split(1 << 16)
+    with torch.no_grad(), progress(len(chunks), "density grid", unit="chunk") as bar:
+        sigma = []
+        for p in chunks:
+            sigma.append(decode(sample_planes(planes, p), decoder)[0])
+            bar.update(1)
+        sigma = torch.cat(sigma).numpy()
+        step = BoxFrame.from_box(scene.box).step
+        level = float(np.log(2.0) / step)  # one marching step is half opaque
+
+        def colours(unit):
+            return decode(sample_planes(planes, torch.from_numpy(unit)), decoder)[1].numpy()
+        mesh = density_to_mesh(sigma.reshape((args.res,) * 3), level, scene.box, colours)
+    write_mesh(mesh, args.output)
+    print(f"wrote {args.output}: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces")
+    return 0
+
+
+def train_decoder_command(args) -> int:
+    from .config import DecoderConfig
+    from .decoder import decoder_path, train_decoder
+    cfg = replace(DecoderConfig(), steps=args.steps, seed=args.seed)
+    out = Path(args.output) if args.output else decoder_path()
+    ckpt = out.with_name(out.name + ".ckpt")
+    from ..device import resolve_device
+
+    summary = train_decoder(cfg, out, checkpoint=ckpt, log=lambda m: print(m, flush=True),
+                            device=resolve_device(args.device))
+    print(json.dumps(summary, indent=2))
+    return 0

@@ -1,0 +1,71 @@
+"""Typed configs of fitting and of the shared decoder's training (torch-free, so the CLI can build its options from them).
+
+Each field's `help` is its documentation and its `--option` text.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+from snapshot3d.options import config_field
+
+__all__ = ["FitConfig", "DecoderConfig", "LADDER", "check_fit_config"]
+
+
+@dataclass
+class FitConfig:
+    """Settings of one plane fit (stored in checkpoints)."""
+
+    plane_res: int = config_field(64, "R: plane resolution (R x R per plane)")
+    plane_channels: int = config_field(8, "C: channels per plane (at most formats.C_MAX)")
+    steps: int = config_field(1500, "optimisation steps")
+    batch_rays: int = config_field(4096, "rays per step")
+    lr: float = config_field(0.04, "Adam learning rate of the plane values at the first step")
+    lr_final: float = config_field(0.004, "learning rate at the last step (exponential decay)")
+    occ_every: int = config_field(16, "steps between occupancy-grid updates")
+    occ_warmup: int = config_field(128, "steps before the first occupancy update (all hull cells occupied until then)")
+    occupancy: bool = config_field(True, "occupancy-based empty-space skipping (off: every sample in the box is evaluated)")
+    min_transmittance: float = config_field(1e-3, "early ray termination: samples behind this transmittance are dropped (0: off)")
+    qat_fraction: float = config_field(0.15, "last fraction of steps trained through the 8-bit rounding the snapshot carries")
+    fg_fraction: float = config_field(0.75, "share of each batch drawn from rays that see the object (when masks exist)")
+    tv_weight: float = config_field(1e-4, "total-variation weight on the planes")
+    empty_weight: float = config_field(1.0, "weight of the density penalty at random points outside the visual hull")
+    seed: int = config_field(0, "random seed")
+    checkpoint_every: int = config_field(250, "steps between checkpoints")
+
+
+@dataclass
+class DecoderConfig:
+    """Joint training of the shared decoder over built-in scenes (spot and lego are held out)."""
+
+    scenes: tuple = config_field(("procedural", "duck", "teapot", "bunny", "suzanne"), "builtin scenes trained on")
+    hidden: int = config_field(32, "decoder width")
+    steps: int = config_field(6000, "total steps, the scenes taken in turn")
+    plane_res: int = config_field(64, "R of each training scene's planes")
+    nested: tuple = config_field((4, 8, 12), "channel counts drawn each step, so that one decoder serves any C")
+    lr: float = config_field(3e-3, "decoder Adam learning rate, decayed 10x over the run")
+    size: int = config_field(200, "rendered view size of the training scenes")
+    seed: int = config_field(0, "random seed")
+
+
+def check_fit_config(cfg: FitConfig) -> FitConfig:
+    """Refuse settings no fit can run with (one-line `UserError`); returns `cfg`."""
+    problems = []
+    if not 1 <= cfg.plane_channels <= formats.C_MAX:
+        problems.append(f"--plane-channels must be in 1..{formats.C_MAX}")
+    if cfg.plane_res < 2:
+        problems.append("--plane-res must be >= 2")
+    if cfg.steps < 1 or cfg.batch_rays < 1 or cfg.occ_every < 1 or cfg.checkpoint_every < 1:
+        problems.append("--steps, --batch-rays, --occ-every and --checkpoint-every must be >= 1")
+    if not (cfg.lr > 0 and cfg.lr_final > 0):
+        problems.append("--lr and --lr-final must be > 0")
+    if not (0 <= cfg.qat_fraction <= 1 and 0 <= cfg.fg_fraction <= 1 and 0 <= cfg.min_transmittance < 1):
+        problems.append("--qat-fraction and --fg-fraction must be in [0, 1], --min-transmittance in [0, 1)")
+    if problems:
+        raise UserError("; ".join(problems))
+    return cfg
+
+
+# `fit --budget auto`: (plane_res, plane_channels) from large to small; all within the paper's 160 kB.
+LADDER = ((64, 12), (64, 8), (48, 8), (48, 4), (32, 4))

@@ -1,0 +1,87 @@
+"""The shared decoder: trained once, jointly with planes for the built-in training scenes, then frozen.
+
+Weights live in the package as `assets/decoder-<DECODER_VERSION>.npz` (numpy arrays, so the torch-free
+runtime reads them too), beside a JSON summary of the run that made them.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+from snapshot3d.paths import asset
+
+from .config import DecoderConfig, FitConfig
+from .field import Decoder
+from .fit import new_state, train_step
+
+__all__ = ["DecoderConfig", "train_decoder", "load_decoder", "decoder_path"]
+
+
+def decoder_path(version: str = formats.DECODER_VERSION) -> Path:
+    return asset(f"decoder-{version}.npz")
+
+
+def load_decoder(version: str = formats.DECODER_VERSION) -> Decoder:
+    path = decoder_path(version)
+    if not path.is_file():
+        raise UserError(f"decoder {version} is not installed ({path}); run 'snapshot3d train decoder'")
+    with np.load(path) as z:
+        dec = Decoder.from_arrays(dict(z))
+    dec.eval()
+    for p in dec.parameters():
+        p.requires_grad_(False)
+    return dec
+
+
+def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None, log=print, device=None) -> dict:
+    from snapshot3d.loaders import load_scene
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(cfg.seed)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    per_scene = math.ceil(cfg.steps / len(cfg.scenes))
+    fcfg = FitConfig(plane_res=cfg.plane_res, plane_channels=formats.C_MAX, steps=per_scene, seed=cfg.seed)
+    states = [new_state(load_scene(f"builtin:{n}", size=cfg.size), fcfg, device=device) for n in cfg.scenes]
+    dec = Decoder(hidden=cfg.hidden).to(device or "cpu")
+    opt = torch.optim.Adam(dec.parameters(), lr=cfg.lr)
+    step0, t_start, hist = 0, time.perf_counter(), {n: [] for n in cfg.scenes}
+    if checkpoint is not None and checkpoint.is_file():
+        ck = torch.load(checkpoint, weights_only=False, map_location=device or "cpu")
+        if ck["cfg"] != asdict(cfg):
+            raise UserError(f"checkpoint {checkpoint} was made with other settings")
+        dec.load_state_dict(ck["dec"]), opt.load_state_dict(ck["opt"]), gen.set_state(ck["gen"])
+        for st, s in zip(states, ck["states"]):
+            st.planes.load_state_dict(s["planes"]), st.occ.load_state_dict(s["occ"]), st.opt.load_state_dict(s["opt"])
+            st.step = s["step"]
+        step0, hist = ck["step"], ck["hist"]
+    for step in range(step0, per_scene * len(cfg.scenes)):
+        k = step % len(cfg.scenes)
+        for g in opt.param_groups:
+            g["lr"] = cfg.lr * 0.1 ** (step / (per_scene * len(cfg.scenes)))
+        c = int(cfg.nested[int(torch.randint(len(cfg.nested), (1,), generator=gen))])
+        mse = train_step(states[k], dec, fcfg, gen, extra_params_opt=opt, channels=c)
+        hist[cfg.scenes[k]].append(mse)
+        if (step + 1) % 250 == 0:
+            line = " ".join(f"{n}={-10 * math.log10(np.mean(h[-20:])):.2f}" for n, h in hist.items() if h)
+            log(f"step {step + 1}: train psnr {line} ({time.perf_counter() - t_start:.0f}s)")
+            if checkpoint is not None:
+                tmp = checkpoint.with_name(checkpoint.name + ".partial")
+                torch.save({"cfg": asdict(cfg), "step": step + 1, "dec": dec.state_dict(), "opt": opt.state_dict(),
+                            "gen": gen.get_state(), "hist": hist,
+                            "states": [{"planes": s.planes.state_dict(), "occ": s.occ.state_dict(),
+                                        "opt": s.opt.state_dict(), "step": s.step} for s in states]}, tmp)
+                tmp.replace(checkpoint)
+    np.savez(out, **dec.state_arrays())
+    summary = {"decoder_version": formats.DECODER_VERSION, "config": asdict(cfg),
+               "final_train_psnr": {n: round(-10 * math.log10(np.mean(h[-50:])), 2) for n, h in hist.items()},
+               "seconds": round(time.perf_counter() - t_start, 1), "torch_threads": torch.get_num_threads()}
+    out.with_suffix(".json").write_text(json.dumps(summary, indent=2))
+    return summary

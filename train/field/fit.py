@@ -1,0 +1,180 @@
+"""Fitting a scene's planes against posed images with the frozen shared decoder.
+
+`fit()` is the whole job (resumable through a checkpoint); `train_step()` is one optimisation step,
+shared with the joint decoder training.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from snapshot3d import formats
+from snapshot3d.carve import carve
+from snapshot3d.errors import UserError
+from snapshot3d.posed import PosedImages
+from snapshot3d.scene import quantize_planes
+
+from .config import FitConfig, check_fit_config
+from .field import TriPlanes, decode, sample_planes, straight_through_8bit
+from .occupancy import OccupancyGrid
+from .rays import RayBank, make_rays
+from .render import density_fn, render_rays
+from .sampler import BoxFrame
+
+__all__ = ["FitConfig", "FitState", "new_state", "train_step", "fit", "FitResult"]
+
+
+@dataclass
+class FitState:
+    """Mutable training state of one scene."""
+
+    planes: TriPlanes
+    occ: OccupancyGrid
+    frame: BoxFrame
+    bank: RayBank
+    opt: torch.optim.Optimizer
+    step: int = 0
+    samples: int = 0
+    rays: int = 0
+    train_seconds: float = 0.0
+
+
+@dataclass
+class FitResult:
+    codes: np.ndarray
+    state: FitState
+    seconds: float
+    log: list = field(default_factory=list)
+
+
+def hull_grid(posed: PosedImages, res: int = formats.OCC_RES) -> torch.Tensor | None:
+    if posed.alpha is None:
+        return None
+    tr = posed.train
+    return torch.from_numpy(carve(posed.alpha[tr], posed.c2w[tr], posed.intrinsics[tr], posed.box, res))
+
+
+def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | None = None,
+              hull: torch.Tensor | None = None, device=None) -> FitState:
+    """Planes, occupancy grid and training rays of one scene, on `device` (None: the CPU)."""
+    check_fit_config(cfg)
+    device = torch.device(device or "cpu")
+    frame = BoxFrame.from_box(posed.box, device)
+    planes = TriPlanes(cfg.plane_res, cfg.plane_channels, seed=cfg.seed)
+    if init_planes is not None:
+        planes.planes.data.copy_(init_planes)
+    planes.to(device)
+    occ = OccupancyGrid(hull=hull if hull is not None else hull_grid(posed)).to(device)
+    opt = torch.optim.Adam(planes.parameters(), lr=cfg.lr)
+    return FitState(planes, occ, frame, make_rays(posed, posed.train, frame).to(device), opt)
+
+
+def _tv(p: torch.Tensor) -> torch.Tensor:
+    return ((p[..., 1:, :] - p[..., :-1, :]) ** 2).mean() + ((p[..., :, 1:] - p[..., :, :-1]) ** 2).mean()
+
+
+def _empty_alpha(planes, decoder, st: FitState, n: int, gen: torch.Generator) -> torch.Tensor:
+    """Mean one-step alpha at random points outside the visual hull: the planes must be empty there by
+    themselves, since the decode side computes its occupancy from the planes alone."""
+    pts = (torch.rand(n, 3, generator=gen) * 2 - 1).to(st.frame.centre.device)
+    g = st.occ.hull.shape[0]
+    cell = ((pts + 1) * 0.5 * g).long().clamp(0, g - 1)
+    pts = pts[~st.occ.hull[cell[:, 0], cell[:, 1], cell[:, 2]]]
+    sigma = decode(sample_planes(planes, pts), decoder)[0]
+    return torch.mean(1 - torch.exp(-sigma * st.frame.step))
+
+
+def lr_at(cfg: FitConfig, step: int) -> float:
+    return cfg.lr * (cfg.lr_final / cfg.lr) ** min(1.0, step / max(1, cfg.steps))
+
+
+def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extra_params_opt=None,
+               channels: int | None = None) -> float:
+    """One step on a batch of rays; updates planes (and the decoder when `extra_params_opt` is given).
+    `channels` < C zeroes the trailing plane channels (nested channels while training the decoder)."""
+    t0 = time.perf_counter()
+    for g in st.opt.param_groups:
+        g["lr"] = lr_at(cfg, st.step)
+    o, d, target = st.bank.batch(cfg.batch_rays, cfg.fg_fraction, gen)
+    planes = st.planes.planes
+    if st.step >= cfg.steps * (1 - cfg.qat_fraction):
+        planes = straight_through_8bit(planes)
+    if channels is not None and channels < planes.shape[1]:
+        planes = planes[:, :channels]
+    occ = st.occ.occ if cfg.occupancy else None
+    color, _, n_samples = render_rays(planes, decoder, st.frame, occ, o, d, jitter=True, generator=gen,
+                                      min_transmittance=cfg.min_transmittance)
+    st.samples += n_samples
+    mse = torch.mean((color - target) ** 2)
+    loss = mse + cfg.tv_weight * _tv(st.planes.planes) if cfg.tv_weight else mse
+    if cfg.empty_weight and st.occ.outside_hull:
+        loss = loss + cfg.empty_weight * _empty_alpha(planes, decoder, st, cfg.batch_rays // 2, gen)
+    st.opt.zero_grad(set_to_none=True)
+    if extra_params_opt is not None:
+        extra_params_opt.zero_grad(set_to_none=True)
+    loss.backward()
+    st.opt.step()
+    if extra_params_opt is not None:
+        extra_params_opt.step()
+    st.planes.clamp_()
+    st.step += 1
+    st.rays += o.shape[0]
+    if cfg.occupancy and st.step >= cfg.occ_warmup and st.step % cfg.occ_every == 0:
+        st.occ.update(density_fn(st.planes.planes.detach(), decoder), st.frame.step, gen)
+    st.train_seconds += time.perf_counter() - t0
+    return float(mse.detach())
+
+
+def _save_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, scene: str):
+    tmp = path.with_name(path.name + ".partial")
+    torch.save({"cfg": asdict(cfg), "scene": scene, "step": st.step, "planes": st.planes.state_dict(), "occ": st.occ.state_dict(),
+                "opt": st.opt.state_dict(), "gen": gen.get_state(), "seconds": st.train_seconds,
+                "rays": st.rays, "samples": st.samples}, tmp)
+    tmp.replace(path)
+
+
+def _load_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, scene: str) -> bool:
+    if not path.is_file():
+        return False
+    ck = torch.load(path, weights_only=False, map_location=st.frame.centre.device)
+    if ck.get("cfg") != asdict(cfg) or ck.get("scene") != scene:
+        raise UserError(f"checkpoint {path} was made for another scene or other settings; "
+                        "delete it or fit with the same settings")
+    st.planes.load_state_dict(ck["planes"]), st.occ.load_state_dict(ck["occ"]), st.opt.load_state_dict(ck["opt"])
+    gen.set_state(ck["gen"])
+    st.step, st.train_seconds, st.rays, st.samples = ck["step"], ck["seconds"], ck["rays"], ck["samples"]
+    return True
+
+
+def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = None, progress=None,
+        init_planes: torch.Tensor | None = None, hull: torch.Tensor | None = None, device=None) -> FitResult:
+    """Optimise planes for `posed` with the frozen `decoder` on `device` (None: the CPU; the decoder is
+    moved there). `progress(step, psnr)` is called every few steps. With `checkpoint`, state is saved
+    every `cfg.checkpoint_every` steps and a run resumes from it."""
+    for p in decoder.parameters():
+        p.requires_grad_(False)
+    torch.manual_seed(cfg.seed)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    st = new_state(posed, cfg, init_planes, hull, device)
+    decoder.to(st.frame.centre.device)
+    if checkpoint is not None:
+        _load_ckpt(checkpoint, st, cfg, gen, posed.name)
+    log, ema = [], None
+    while st.step < cfg.steps:
+        mse = train_step(st, decoder, cfg, gen)
+        ema = mse if ema is None else 0.9 * ema + 0.1 * mse
+        if st.step % 25 == 0 or st.step == cfg.steps:
+            psnr = -10 * math.log10(max(ema, 1e-10))
+            log.append({"step": st.step, "train_psnr": round(psnr, 3), "seconds": round(st.train_seconds, 2),
+                        "occupied": round(float(st.occ.occ.float().mean()), 4)})
+            if progress is not None:
+                progress(st.step, psnr)
+        if checkpoint is not None and st.step % cfg.checkpoint_every == 0:
+            _save_ckpt(checkpoint, st, cfg, gen, posed.name)
+    codes = quantize_planes(st.planes.planes.detach().cpu().numpy())
+    return FitResult(codes=codes, state=st, seconds=st.train_seconds, log=log)

@@ -1,0 +1,60 @@
+"""Training rays: every pixel of the training views as a q-space ray with its target colour."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from snapshot3d.cameras import pixel_rays
+from snapshot3d.posed import PosedImages
+
+from .sampler import BoxFrame
+
+__all__ = ["RayBank", "make_rays", "view_rays"]
+
+
+@dataclass
+class RayBank:
+    """origins, dirs, rgb: (M, 3) float32 (q space, unit dirs, RGB in [0, 1]); fg: indices of rays that
+    see the object (from the coverage mask), or None."""
+
+    origins: Tensor
+    dirs: Tensor
+    rgb: Tensor
+    fg: Tensor | None
+
+    def __len__(self) -> int:
+        return self.rgb.shape[0]
+
+    def batch(self, n: int, fg_fraction: float, generator: torch.Generator) -> tuple[Tensor, Tensor, Tensor]:
+        """n rays, `fg_fraction` of them drawn from the foreground rays when those are known."""
+        n_fg = int(n * fg_fraction) if self.fg is not None and len(self.fg) else 0
+        idx = torch.randint(len(self), (n - n_fg,), generator=generator)
+        if n_fg:
+            idx = torch.cat([idx, self.fg[torch.randint(len(self.fg), (n_fg,), generator=generator)]])
+        idx = idx.to(self.rgb.device)
+        return self.origins[idx], self.dirs[idx], self.rgb[idx]
+
+    def to(self, device) -> "RayBank":
+        """The rays on `device` (the foreground index stays on the CPU, where the generator draws)."""
+        return RayBank(self.origins.to(device), self.dirs.to(device), self.rgb.to(device), self.fg)
+
+
+def view_rays(c2w: np.ndarray, intr: np.ndarray, width: int, height: int, frame: BoxFrame):
+    """q-space rays (H*W, 3) of one view, row-major, on the frame's device."""
+    o, d = pixel_rays(np.asarray(c2w, np.float64), *[float(x) for x in intr], width, height)
+    dev = frame.centre.device
+    return frame.rays_to_q(torch.from_numpy(o).to(dev), torch.from_numpy(d).to(dev))
+
+
+def make_rays(posed: PosedImages, views: np.ndarray, frame: BoxFrame) -> RayBank:
+    os_, ds, cs, fgs = [], [], [], []
+    for i in views:
+        o, d = view_rays(posed.c2w[i], posed.intrinsics[i], posed.width, posed.height, frame)
+        os_.append(o), ds.append(d), cs.append(torch.from_numpy(posed.images[i].reshape(-1, 3)))
+        if posed.alpha is not None:
+            fgs.append(torch.from_numpy(posed.alpha[i].reshape(-1) > 0.01))
+    fg = torch.nonzero(torch.cat(fgs)).squeeze(1) if fgs else None
+    return RayBank(torch.cat(os_), torch.cat(ds), torch.cat(cs), fg)
