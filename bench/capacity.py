@@ -16,15 +16,16 @@ import os
 from pathlib import Path
 
 import numpy as np
-from snapshot3d.train.codec.capacity import best_plane_rmse, capacity_bits, fit_channel
-from snapshot3d.train.codec.commands import load_host, scene_meta
-from snapshot3d.train.codec.hinet import embed_planes, load_codec, restore_secret
-from snapshot3d.train.codec.oracle import oracle_correct
 
 from snapshot3d import formats
 from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr
+from snapshot3d.scanner.backgrounds import load_host
+from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
+from snapshot3d.train.codec.capacity import best_plane_rmse, capacity_bits, fit_channel
+from snapshot3d.train.codec.hinet import embed_planes, load_codec, restore_secret
+from snapshot3d.train.codec.oracle import oracle_correct
 
 from .codec import TARGETS
 from .common import (
@@ -71,7 +72,7 @@ def _capture_rows(net, judge, sname, hname, host, seeds) -> list[dict]:
     rows = []
     for sev in SEVERITIES:
         for seed in capture_seeds(sev, seeds):
-            rect = through_channel(snap, scene_meta(scene, 1.0), sev, seed)
+            rect = through_channel(snap, scene_meta(scene, formats.FILE_CODEC, 1.0), sev, seed)
             if rect is None:
                 continue
             g, n, count = fit_channel(sent, rect[_CROP:-_CROP, _CROP:-_CROP] / 255.0)
@@ -131,12 +132,14 @@ def bench_capacity_command(args) -> int:
             print(f"{sname} / {hname}: {len(rows)} captures", flush=True)
     bounds = _bounds(rows, scenes, curves)
     write_report(Path(args.out), "capacity", rows, {
-        "view_size": args.size, "codec": formats.CODEC_VERSION, "hosts": args.hosts.split(","),
+        "view_size": args.size, "codec": formats.FILE_CODEC, "hosts": args.hosts.split(","),
         "severity_host_target": SEVERITY_HOST,
         "assumptions": "Gaussian noise per subband (opponent colour x 3 Haar levels), dirty-paper embedding, "
                        "Gaussian plane source; see snapshot3d/train/capacity.py",
         "scenes": bounds})
     write_capacity_chart(bounds, Path(args.out) / "capacity.png", os.cpu_count())
+    if not args.quick:
+        write_file_curve(bounds)
     for sname, b in bounds.items():
         print(sname, {s: (round(v["capacity_kb"], 1), round(v["measured_restore_psnr"], 1), round(v["best_restore_psnr"], 1))
                       for s, v in b["by_severity"].items()})
@@ -181,3 +184,13 @@ def write_capacity_chart(bounds: dict, path: Path, cores: int) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def write_file_curve(bounds: dict) -> None:
+    """The file medium's budget curve: the shipped codec's measured restore_psnr on JPEG-75 captures per
+    plane size (what `fit --budget auto --medium file` charges each payload)."""
+    from .common import update_budget_curve
+    pts = [(b["values"], b["by_severity"]["jpeg75"]["measured_restore_psnr"]) for b in bounds.values()
+           if "jpeg75" in b["by_severity"]]
+    if pts:
+        update_budget_curve("file", pts, "jpeg75", "snapshot3d bench capacity (measured restore_psnr of the shipped codec)")

@@ -17,15 +17,15 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+from snapshot3d.metrics import psnr
 from snapshot3d.scanner.backgrounds import load_background
 from snapshot3d.scanner.qr import SheetMeta
 from snapshot3d.scanner.scan import scan_image
 from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
-
-from snapshot3d import formats
-from snapshot3d.errors import UserError
-from snapshot3d.metrics import psnr
 
 __all__ = ["measure_residual", "bench_channel_command"]
 

@@ -23,7 +23,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
-from snapshot3d.train.codec.commands import load_host, scene_meta
+
+from snapshot3d import codec_layout, formats
+from snapshot3d.errors import UserError
+from snapshot3d.images import write_png
+from snapshot3d.metrics import ssim
+from snapshot3d.scanner.backgrounds import load_host
+from snapshot3d.scanner.qr import scene_meta
+from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
 from snapshot3d.train.codec.config import CodecConfig
 from snapshot3d.train.codec.hinet import (
     build_codec,
@@ -32,12 +39,6 @@ from snapshot3d.train.codec.hinet import (
     restore_secret,
 )
 from snapshot3d.train.codec.refine import snapshot_of
-
-from snapshot3d import codec_layout, formats
-from snapshot3d.errors import UserError
-from snapshot3d.images import write_png
-from snapshot3d.metrics import ssim
-from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
 
 from .common import (
     SEVERITIES,
@@ -85,7 +86,7 @@ def _codec_rows(method, net, judge, scene_name, host_name, host, severities, see
     rows = []
     for sev in severities:
         for seed in capture_seeds(sev, seeds):
-            rect = through_channel(snap, scene_meta(scene, strength), sev, seed)
+            rect = through_channel(snap, scene_meta(scene, formats.FILE_CODEC, strength), sev, seed)
             row = dict(base, severity=sev, seed=seed, detected=int(rect is not None))
             if rect is not None:
                 row["restore_psnr"] = judge.restore_psnr(restore_secret(net, rect, strength))
@@ -101,7 +102,7 @@ def _lsb_rows(judge, scene_name, host_name, host, severities):
             "host_ssim": ssim(snap / 255, host8 / 255)}
     rows = []
     for sev in severities:
-        rect = through_channel(snap, scene_meta(judge.scene, 1.0), sev, 0)
+        rect = through_channel(snap, scene_meta(judge.scene, formats.FILE_CODEC, 1.0), sev, 0)
         row = dict(base, severity=sev, seed=0, detected=int(rect is not None))
         if rect is not None:
             planes = dequantize_planes(lsb_extract(rect, codes.shape))
@@ -122,7 +123,7 @@ def _views_rows(net, judge, scene_name, host_name, host, severities, counts=(3, 
         snap = embed_planes(net, host, pseudo)
         host8 = (host * 255 + 0.5).astype(np.uint8)
         for sev in severities:
-            rect = through_channel(snap, scene_meta(judge.scene, 1.0), sev, 0)
+            rect = through_channel(snap, scene_meta(judge.scene, formats.FILE_CODEC, 1.0), sev, 0)
             row = {"method": f"views-{n}", "scene": scene_name, "host": host_name, "severity": sev, "seed": 0,
                    "views": n, "host_psnr": psnr(snap / 255, host8 / 255), "detected": int(rect is not None)}
             if rect is not None:
@@ -178,7 +179,7 @@ def side_by_side(net, scene, host, judge, out: Path, refine: int = 0) -> None:
     snap = snapshot_of(net, host, scene.planes(), refine)
     ok, buf = cv2.imencode(".jpg", cv2.cvtColor(snap, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 75])
     jpeg = cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-    photo = through_channel(snap, scene_meta(scene, 1.0), "moderate", 0)
+    photo = through_channel(snap, scene_meta(scene, formats.FILE_CODEC, 1.0), "moderate", 0)
     pick = [0, 5, 10, 15]
     rows = [judge.ref[pick]]
     for rect in (jpeg, photo):
@@ -271,7 +272,24 @@ def write_codec_chart(rows: list[dict], path: Path, cores: int) -> None:
     plt.close(fig)
 
 
+_DEFAULTS = {"file": {"scenes": "snapshot3d/assets/spot.s3d,cache/scenes/lego.s3d", "seeds": 3,
+                      "strengths": "0.5,0.75,1,1.5,2"},
+             "print": {"scenes": "bench/models/spot-print.s3d,bench/models/lego-print.s3d", "seeds": 6,
+                       "strengths": "0.5,0.71,1,1.41,2"}}
+
+
 def bench_codec_command(args) -> int:
+    """`bench codec --medium file|print`: the options left unset take the medium's defaults."""
+    for k, v in _DEFAULTS[args.medium].items():
+        if getattr(args, k) is None:
+            setattr(args, k, v)
+    if args.medium == "print":
+        from .codec_print import bench_codec_print_command
+        return bench_codec_print_command(args)
+    return _bench_file_codec(args)
+
+
+def _bench_file_codec(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     net, cfg = load_codec()
@@ -305,7 +323,7 @@ def bench_codec_command(args) -> int:
     summary = summarise(rows, headline or None)
     doc = {"command": "snapshot3d " + " ".join(__import__("sys").argv[1:]), "cores": os.cpu_count(),
            "torch_threads": torch.get_num_threads(), "view_size": args.size,
-           "codec": {"version": formats.CODEC_VERSION, "blocks": cfg.blocks, "width": cfg.width},
+           "codec": {"version": formats.FILE_CODEC, "blocks": cfg.blocks, "width": cfg.width},
            "targets": TARGETS, "headline_scenes": headline, "summary": summary,
            "by_scene": {name: summarise(rows, [name]) for name in scenes}, "arch": [r for r in rows if r["method"] == "arch"]}
     (out / "codec.json").write_text(json.dumps(doc, indent=2) + "\n")

@@ -12,17 +12,17 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from snapshot3d.train.codec.commands import load_host
-from snapshot3d.train.codec.hinet import load_codec, restore_secret
-from snapshot3d.train.codec.refine import snapshot_of
-from snapshot3d.viewer.render import render_views
-from snapshot3d.viewer.runtime import field_models
 
 from snapshot3d import codec_layout, formats
 from snapshot3d.cameras import orbit_cameras
 from snapshot3d.metrics import psnr
 from snapshot3d.paths import asset
+from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
+from snapshot3d.train.codec.hinet import load_codec, restore_secret
+from snapshot3d.train.codec.refine import snapshot_of
+from snapshot3d.viewer.render import render_views
+from snapshot3d.viewer.runtime import field_models
 
 from .common import pyplot, write_report
 

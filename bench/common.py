@@ -19,7 +19,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr as _psnr
 
 __all__ = ["SEVERITIES", "PHYSICAL", "write_report", "write_rows", "psnr", "median", "capture_seeds",
-           "through_channel", "ViewJudge", "pyplot", "bench_progress"]
+           "through_channel", "ViewJudge", "pyplot", "bench_progress", "update_budget_curve"]
 
 SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")
 PHYSICAL = ("mild", "moderate", "severe")
@@ -81,9 +81,8 @@ class ViewJudge:
     scene's: `restore_psnr` of restored planes."""
 
     def __init__(self, scene, size: int):
-        from snapshot3d.train.field.decoder import load_decoder
-
         from snapshot3d.cameras import orbit_cameras
+        from snapshot3d.train.field.decoder import load_decoder
 
         self.scene, self.size, self.decoder = scene, size, load_decoder()
         self.cams = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
@@ -91,6 +90,7 @@ class ViewJudge:
 
     def views(self, planes: np.ndarray) -> np.ndarray:
         import torch
+
         from snapshot3d.train.field.render import render_views
         return render_views(torch.from_numpy(np.ascontiguousarray(planes, np.float32)), self.decoder, self.scene.box,
                             *self.cams, self.size, self.size)
@@ -118,3 +118,17 @@ def bench_progress(total: int, desc: str):
     """A progress bar (`snapshot3d.progress`) for a benchmark's `total` units of work."""
     from snapshot3d.progress import progress
     return progress(total, desc, unit="run")
+
+
+def update_budget_curve(medium: str, points: list, severity: str, source: str) -> Path:
+    """Write a medium's curve of payload size against restore fidelity, [(plane values, restore_psnr)],
+    into the package's `budget-curves.json`, which `fit --budget auto --medium` reads."""
+    from snapshot3d.paths import asset
+    from snapshot3d.train.field.budget import CURVES_FILE
+
+    path = asset(CURVES_FILE)
+    curves = json.loads(path.read_text()) if path.is_file() else {}
+    curves[medium] = {"severity": severity, "points": sorted([int(v), round(float(p), 3)] for v, p in points),
+                      "source": source}
+    path.write_text(json.dumps(curves, indent=2) + "\n")
+    return path

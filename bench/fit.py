@@ -13,14 +13,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from snapshot3d.train.field.config import LADDER, FitConfig
-from snapshot3d.train.field.decoder import load_decoder
-from snapshot3d.train.field.evaluate import evaluate_planes
-from snapshot3d.train.field.fit import fit, hull_grid
 
 from snapshot3d.builtin import shared_data_dir
 from snapshot3d.errors import UserError
 from snapshot3d.scene import Orbit, Scene, dequantize_planes
+from snapshot3d.train.field.config import LADDER, FitConfig
+from snapshot3d.train.field.decoder import load_decoder
+from snapshot3d.train.field.evaluate import evaluate_planes
+from snapshot3d.train.field.fit import fit, hull_grid
 
 from .common import pyplot
 

@@ -16,16 +16,16 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
+from snapshot3d import formats
+from snapshot3d.errors import UserError
+from snapshot3d.metrics import psnr
 from snapshot3d.scanner.imageio_safe import write_atomic
 from snapshot3d.scanner.presets import PRESETS
 from snapshot3d.scanner.qr import SheetMeta
 from snapshot3d.scanner.scan import scan_image
 from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
-
-from snapshot3d import formats
-from snapshot3d.errors import UserError
-from snapshot3d.metrics import psnr
 
 from .common import pyplot
 

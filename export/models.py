@@ -1,8 +1,8 @@
 """The exported graphs as thin torch modules over the functional core (`train.field`,
 `train.codec_net`), so that export, parity tests and the torch reference share one set of maths.
 
-- `RestoreGraph`: snapshot (1, 3, 380, 380) float32 RGB in [0, 1] -> secret (1, 24, 190, 190)
-  (the codec's reverse pass with the learned z).
+- `RestoreGraph` (the file medium): snapshot (1, 3, 380, 380) float32 RGB in [0, 1] -> secret
+  (1, 24, 95, 95) (the invertible codec's reverse pass with the learned z).
 - The renderer's neural part, for the field on a regular grid (the viewer bakes the field once per
   decode, `viewer.bake`; where samples go and the compositing are numpy and OpenCV):
   - `ProjectGraph`: planes (3, C_MAX, R, R) float32 in [-1, 1] (zero-padded to C_MAX channels),

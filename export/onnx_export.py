@@ -24,10 +24,24 @@ from .models import (
     RestoreGraph,
 )
 
-__all__ = ["OPSET", "MODEL_KINDS", "export_restore", "export_project", "export_field", "export_all", "model_names"]
+__all__ = ["OPSET", "MODEL_KINDS", "DOCS", "export_restore", "export_project", "export_field",
+           "export_all", "model_names"]
 
 OPSET = 17
 MODEL_KINDS = ("restore", "project", "field")
+# Each graph's contract, written into the model as its doc string (README "The ONNX models" says the same).
+DOCS = {
+    "restore": "file medium (codec hinet-1). Input snapshot: float32 (1, 3, 380, 380), RGB, NCHW, values in [0, 1] "
+               "(uint8 / 255). Output secret: float32 (1, 24, 95, 95): plane k's channel c at index 8k + c (planes xy, "
+               "xz, yz); divide by the strength in the metadata, then planes = P S P^T per channel with P = pinv(U), U "
+               "(95, R) the linear interpolation of R texel centres onto 95 cell centres (snapshot3d/codec_layout.py).",
+    "project": "renderer, part 1. Inputs planes: float32 (3, 12, R, R) in [-1, 1] (planes xy, xz, yz; channels beyond "
+               "the scene's zero); interp: float32 (B, R), the bilinear weights of B grid coordinates over R texels. "
+               "Output tables: float32 (3, B*B, 32), the decoder's first layer (without bias) at every grid node.",
+    "field": "renderer, part 2. Inputs tables: float32 (3, T, 32) from project; rows: int64 (M, 3), the table row of each "
+             "point in each plane. Outputs density_logit: float32 (M,) (density = exp, clamped at 15); rgb: float32 "
+             "(M, 3) in [0, 1].",
+}
 
 
 def model_names() -> dict:
@@ -35,20 +49,21 @@ def model_names() -> dict:
     return {k: model_file(k) for k in MODEL_KINDS}
 
 
-def _metadata() -> dict:
-    return {"codec_id": formats.CODEC_VERSION, "decoder_version": formats.DECODER_VERSION,
+def _metadata(codec: str) -> dict:
+    return {"codec_id": codec, "decoder_version": formats.DECODER_VERSION,
             "snapshot_size": str(formats.SNAPSHOT_SIZE), "orbit_views": str(formats.ORBIT_VIEWS),
             "orbit_size": str(formats.ORBIT_SIZE), "orbit_elevation_deg": str(formats.ORBIT_ELEVATION_DEG),
             "orbit_fov_deg": str(formats.ORBIT_FOV_DEG), "c_max": str(formats.C_MAX), "opset": str(OPSET)}
 
 
-def _finish(buf: bytes, path: Path, producer: str) -> int:
+def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str) -> int:
     import onnx
 
     model = onnx.load_from_string(buf)
-    for k, v in _metadata().items():
+    for k, v in _metadata(codec).items():
         model.metadata_props.append(onnx.StringStringEntryProto(key=k, value=v))
     model.producer_name = producer
+    model.doc_string = DOCS[kind]
     onnx.checker.check_model(model, full_check=True)
     data = model.SerializeToString()
     tmp = path.with_name(path.name + ".partial")
@@ -57,33 +72,32 @@ def _finish(buf: bytes, path: Path, producer: str) -> int:
     return len(data)
 
 
-def _export(module, args, names_in, names_out, dynamic, path: Path, producer: str) -> int:
+def _export(module, args, names_in, names_out, dynamic, path: Path, kind: str, codec: str = formats.FILE_CODEC) -> int:
     buf = io.BytesIO()
     with torch.no_grad():
         torch.onnx.export(module, args, buf, input_names=names_in, output_names=names_out, opset_version=OPSET,
                           dynamic_axes=dynamic, do_constant_folding=True, dynamo=False)
-    return _finish(buf.getvalue(), path, producer)
+    return _finish(buf.getvalue(), path, f"snapshot3d {kind}", kind, codec)
 
 
 def export_restore(codec, path: Path) -> int:
     s = formats.SNAPSHOT_SIZE
     x = torch.rand(1, 3, s, s)
-    return _export(RestoreGraph(codec).eval(), (x,), RESTORE_INPUTS, RESTORE_OUTPUTS, None, path,
-                   "snapshot3d restore")
+    return _export(RestoreGraph(codec).eval(), (x,), RESTORE_INPUTS, RESTORE_OUTPUTS, None, path, "restore")
 
 
 def export_project(decoder, path: Path) -> int:
     planes = torch.rand(3, formats.C_MAX, 64, 64) * 2 - 1
     dynamic = {"planes": {2: "R", 3: "R"}, "interp": {0: "B", 1: "R"}, "tables": {1: "T"}}
     return _export(ProjectGraph(decoder).eval(), (planes, torch.rand(96, 64)), PROJECT_INPUTS, PROJECT_OUTPUTS,
-                   dynamic, path, "snapshot3d project")
+                   dynamic, path, "project")
 
 
 def export_field(decoder, path: Path) -> int:
     tables = torch.rand(3, 96 * 96, decoder.hidden)
     dynamic = {"tables": {1: "T"}, "rows": {0: "M"}, "density_logit": {0: "M"}, "rgb": {0: "M"}}
     return _export(FieldGraph(decoder).eval(), (tables, torch.randint(0, 96 * 96, (2048, 3))), FIELD_INPUTS,
-                   FIELD_OUTPUTS, dynamic, path, "snapshot3d field")
+                   FIELD_OUTPUTS, dynamic, path, "field")
 
 
 def export_all(out: Path, log=print) -> dict:

@@ -47,9 +47,8 @@ def _ort_field_models(project_path, field_path):
 def field_parity(project_path, field_path, size: int = 96) -> dict:
     """Max abs difference of the views of spot's planes rendered through the ORT graphs and through
     torch (the same renderer around them)."""
-    from snapshot3d.viewer.render import render_views
-
     from snapshot3d.cameras import orbit_cameras
+    from snapshot3d.viewer.render import render_views
 
     scene = _spot()
     c2w, intr = orbit_cameras(scene.orbit, 3, size)
@@ -61,15 +60,14 @@ def field_parity(project_path, field_path, size: int = 96) -> dict:
 
 def restore_parity(restore_path, project_path, field_path, size: int = 96) -> dict:
     """restore_psnr of spot hidden in a bundled host, restored by torch and by ORT (same renderer)."""
-    from snapshot3d.train.codec.commands import load_host
-    from snapshot3d.train.codec.hinet import embed_planes, load_codec, restore_secret
-    from snapshot3d.viewer.render import render_views
-    from snapshot3d.viewer.runtime import session
-
     from snapshot3d import codec_layout
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.metrics import psnr
+    from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scene import dequantize_planes, quantize_planes
+    from snapshot3d.train.codec.hinet import embed_planes, load_codec, restore_secret
+    from snapshot3d.viewer.render import render_views
+    from snapshot3d.viewer.runtime import session
 
     scene = _spot()
     net, _ = load_codec()

@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["BACKGROUND_NAMES", "background_names", "load_background"]
+__all__ = ["BACKGROUND_NAMES", "background_names", "load_background", "load_host"]
 
 BACKGROUND_NAMES = ("astronaut", "coffee", "chelsea", "rocket", "camera", "brick", "grass", "gravel", "coins",
                     "moon", "hubble_deep_field", "immunohistochemistry")
@@ -42,3 +42,22 @@ def load_background(name: str) -> np.ndarray:
     img = np.ascontiguousarray(img[..., :3])
     img.setflags(write=False)
     return img
+
+
+def load_host(spec: str) -> np.ndarray:
+    """A host photo for `embed`: `builtin:NAME` (a bundled photo) or an image file -> (380, 380, 3) float32
+    RGB in [0, 1], the centred square crop resized."""
+    from snapshot3d import formats
+    from snapshot3d.errors import UserError
+    from snapshot3d.images import fit_square
+
+    from .imageio_safe import read_image_bgr
+
+    if spec.startswith("builtin:"):
+        name = spec.split(":", 1)[1]
+        if name not in background_names():
+            raise UserError(f"unknown bundled host {name!r}; choose from {', '.join(background_names())}")
+        rgb = load_background(name)
+    else:
+        rgb = cv2.cvtColor(read_image_bgr(spec, "host photo"), cv2.COLOR_BGR2RGB)
+    return fit_square(rgb, formats.SNAPSHOT_SIZE).astype(np.float32) / 255.0

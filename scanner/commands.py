@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -18,6 +19,15 @@ def _json_bytes(obj) -> bytes:
     return (json.dumps(obj, indent=2) + "\n").encode()
 
 
+def _printed_width_mm(png: Path, width_px: int) -> float | None:
+    """The width the sheet prints at, from the dpi `sheet` writes into its PNG (None when it has none)."""
+    from PIL import Image
+
+    with Image.open(png) as im:
+        dpi = im.info.get("dpi")
+    return width_px / float(dpi[0]) * 25.4 if dpi and float(dpi[0]) > 1 else None
+
+
 def _sheet_png(path: Path) -> Path:
     """The sheet image to photograph: the file itself, or for a .pdf the PNG `sheet` wrote beside it."""
     if path.suffix.lower() != ".pdf":
@@ -30,6 +40,7 @@ def _sheet_png(path: Path) -> Path:
 
 
 def simulate_command(args) -> int:
+    from .presets import get_preset, print_dots
     from .simulate import simulate
 
     out = Path(args.output)
@@ -38,9 +49,13 @@ def simulate_command(args) -> int:
         raise UserError(f"cannot write {out.name}: use a .jpg or .png file name")
     if args.severity == "none" and ext != ".png":
         raise UserError("severity 'none' is lossless: write the photo as .png")
-    sheet = cv2.cvtColor(read_image_bgr(_sheet_png(Path(args.sheet)), "sheet"), cv2.COLOR_BGR2RGB)
+    png = _sheet_png(Path(args.sheet))
+    sheet = cv2.cvtColor(read_image_bgr(png, "sheet"), cv2.COLOR_BGR2RGB)
+    preset, width_mm = get_preset(args.severity), _printed_width_mm(png, sheet.shape[1])
+    if preset.physical and width_mm is not None:  # the printer's dots per snapshot pixel follow the print's size
+        preset = replace(preset, print_dots_per_px=print_dots(width_mm))
     try:
-        data, kind, truth = simulate(sheet, args.severity, args.seed)
+        data, kind, truth = simulate(sheet, preset, args.seed)
     except ValueError as e:
         raise UserError(str(e)) from None
     if (kind == ".png") != (ext == ".png"):  # keep the channel's bytes; only change the container

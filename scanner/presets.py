@@ -8,7 +8,17 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-__all__ = ["Preset", "PRESETS", "SEVERITIES", "get_preset"]
+__all__ = ["Preset", "PRESETS", "SEVERITIES", "get_preset", "PRINTER_DPI", "print_dots"]
+
+PRINTER_DPI = 600
+"""the simulated printer's resolution; a sheet's printed size sets its dots per snapshot pixel"""
+
+
+def print_dots(width_mm: float) -> int:
+    """Printer dots per snapshot pixel for a sheet printed `width_mm` wide at PRINTER_DPI (the presets'
+    4 is a sheet of about 100 mm)."""
+    from . import layout
+    return max(1, round(width_mm / 25.4 * PRINTER_DPI / layout.sheet_size()[0]))
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.errors import UserError
 
-__all__ = ["SheetMeta", "encode_payload", "decode_payload", "qr_matrix", "read_qr", "check_codec"]
+__all__ = ["SheetMeta", "encode_payload", "decode_payload", "qr_matrix", "read_qr", "check_codec", "scene_meta"]
 
 
 @dataclass(frozen=True)
@@ -22,8 +22,8 @@ class SheetMeta:
 
     version: int = formats.SHEET_FORMAT_VERSION
     """sheet format version"""
-    codec: str = formats.CODEC_ID
-    """id of the codec that made the snapshot"""
+    codec: str = formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM]
+    """id of the codec that made the snapshot (`formats.CODEC_MEDIUM` names its medium)"""
     box: tuple | None = None
     """scene box (x0, y0, z0, x1, y1, z1) in world units, or None"""
     orbit: tuple | None = None
@@ -114,10 +114,21 @@ def read_qr(gray: np.ndarray) -> str | None:
 
 
 def check_codec(meta: SheetMeta) -> None:
-    """UserError when the sheet was made for another format or codec than this build reads."""
+    """UserError when the snapshot was made for another sheet format or a codec this build does not have."""
     if meta.version != formats.SHEET_FORMAT_VERSION:
         raise UserError(f"sheet format version {meta.version} is not supported (this build reads "
                         f"version {formats.SHEET_FORMAT_VERSION})")
-    if meta.codec != formats.CODEC_ID:
-        raise UserError(f"wrong codec id in the QR code: the sheet was made for codec {meta.codec!r}, "
-                        f"this build decodes {formats.CODEC_ID!r}")
+    if meta.codec not in formats.CODEC_MEDIUM:
+        known = ", ".join(f"{c} ({m})" for c, m in formats.CODEC_MEDIUM.items())
+        raise UserError(f"unknown codec id {meta.codec!r} in the snapshot's metadata or QR code: this build decodes "
+                        f"{known}")
+
+
+def scene_meta(scene, codec: str = formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM], strength: float | None = 1.0) -> SheetMeta:
+    """What a snapshot of `scene` (`snapshot3d.scene.Scene`) made with `codec` carries as metadata: box,
+    orbit, plane size, embedding strength."""
+    o = scene.orbit
+    return SheetMeta(codec=codec, box=tuple(float(v) for v in np.asarray(scene.box).ravel()),
+                     orbit=(float(o.radius), float(o.elevation_deg), float(o.fov_deg)),
+                     target=tuple(float(v) for v in o.target), planes=(scene.resolution, scene.channels),
+                     strength=None if strength is None else float(strength))

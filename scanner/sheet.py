@@ -6,6 +6,7 @@ perfect capture gives the snapshot back exactly."""
 from __future__ import annotations
 
 import io
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,9 +18,9 @@ from snapshot3d.errors import UserError
 
 from . import layout
 from .imageio_safe import read_image_bgr, write_atomic
-from .qr import SheetMeta, encode_payload, qr_matrix
+from .qr import SheetMeta, encode_payload, qr_matrix, scene_meta
 
-__all__ = ["SheetConfig", "render_sheet", "sheet_command", "meta_from_scene", "write_print_files"]
+__all__ = ["SheetConfig", "render_sheet", "sheet_command", "write_print_files"]
 
 
 @dataclass(frozen=True)
@@ -68,17 +69,6 @@ def render_sheet(snapshot: np.ndarray, meta: SheetMeta, k: int) -> np.ndarray:
     return sheet
 
 
-def meta_from_scene(path) -> SheetMeta:
-    """Sheet metadata with the box and orbit of a scene file (.s3d)."""
-    from snapshot3d.scene import load_scene_file
-
-    scene = load_scene_file(path)
-    o = scene.orbit
-    return SheetMeta(box=tuple(float(v) for v in np.asarray(scene.box).ravel()),
-                     orbit=(float(o.radius), float(o.elevation_deg), float(o.fov_deg)),
-                     target=tuple(float(v) for v in o.target), planes=(scene.resolution, scene.channels))
-
-
 def _png_bytes(rgb: np.ndarray, width_mm: float) -> bytes:
     """PNG carrying the dpi that prints it `width_mm` wide."""
     from PIL import Image
@@ -114,7 +104,12 @@ def sheet_command(args) -> int:
     n = formats.SNAPSHOT_SIZE
     if snap.shape[:2] != (n, n):
         raise UserError(f"{Path(args.snapshot).name} is {snap.shape[1]}x{snap.shape[0]}; a snapshot is {n}x{n}")
-    meta = meta_from_scene(args.scene) if args.scene else SheetMeta()
+    if args.scene:
+        from snapshot3d.scene import load_scene_file
+
+        meta = scene_meta(load_scene_file(args.scene), strength=None)
+    else:
+        meta = SheetMeta()
     if not args.scene:  # a snapshot from `embed` carries its own metadata
         from .snapfile import read_snapshot
 
@@ -122,6 +117,10 @@ def sheet_command(args) -> int:
             meta = read_snapshot(args.snapshot)[1]
         except UserError:
             pass
+    if formats.CODEC_MEDIUM.get(meta.codec) == "file":
+        print(f"note: {Path(args.snapshot).name} was made for the file medium (codec {meta.codec}), which a printed "
+              f"and photographed copy does not survive well; 'snapshot3d embed --medium print' makes one for printing",
+              file=sys.stderr)
     k = cfg.dots_per_pixel()
     sheet = render_sheet(snap, meta, k)
     files = write_print_files(out, sheet, cfg.width_mm)

@@ -40,6 +40,7 @@ def _add(sub, name: str, help: str, func, **kw) -> argparse.ArgumentParser:
 
 def _fit_parsers(sub) -> None:
     from snapshot3d.train.codec.config import CodecConfig  # torch-free dataclasses
+    from snapshot3d.train.codec.print_config import PrintCodecConfig
     from snapshot3d.train.field.config import FitConfig
 
     f = _add(sub, "fit", "fit a compact tri-plane scene to posed images (torch)",
@@ -48,7 +49,11 @@ def _fit_parsers(sub) -> None:
                                  "(procedural, spot, duck, teapot, bunny, suzanne)")
     f.add_argument("-o", "--output", required=True, help="scene file to write (.s3d)")
     f.add_argument("--budget", default="fixed", choices=("fixed", "auto"),
-                   help="auto: fit a ladder of plane sizes and keep the smallest within 0.5 dB of the best")
+                   help="auto: fit a ladder of plane sizes and keep the smallest within 0.5 dB of the best (by "
+                        "field_psnr, or with --medium by the e2e_psnr expected through that medium)")
+    f.add_argument("--medium", default=None, choices=("print", "file"),
+                   help="with --budget auto: the medium the scene will travel through; its codec's loss at each "
+                        "payload counts (print: a photographed print carries far less, so smaller planes win)")
     f.add_argument("--downscale", type=int, default=1, help="divide image size by this on load")
     f.add_argument("--size", type=int, default=200, help="view size of builtin scenes")
     f.add_argument("--resume", action="store_true", help="continue from OUTPUT.ckpt if present")
@@ -83,23 +88,35 @@ def _fit_parsers(sub) -> None:
     tc.add_argument("-o", "--output", help="weights file (default: the package's assets)")
     tc.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help=DEVICE_HELP)
     add_dataclass_options(tc, CodecConfig)
+    tp = _add(tsub, "print-codec", "train the print medium's restore front-end on captures made through simulate "
+                                   "+ scan (resumable)", _run("snapshot3d.train.codec.commands", "train_print_codec_command"))
+    tp.add_argument("--data", default="cache/print-captures", help="folder of training captures (made when missing)")
+    tp.add_argument("--workers", type=int, default=0, help="processes making captures (0: one per core)")
+    tp.add_argument("-o", "--output", help="weights file (default: bench/models/print-front.npz)")
+    tp.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help=DEVICE_HELP)
+    add_dataclass_options(tp, PrintCodecConfig)
 
 
 def _codec_parsers(sub) -> None:
-    e = _add(sub, "embed", "hide a scene in a host photo: a 380x380 snapshot (torch)",
+    e = _add(sub, "embed", "hide a scene in a host photo: a 380x380 snapshot for a medium (print or file)",
              _run("snapshot3d.train.codec.commands", "embed_command"))
     e.add_argument("scene", help="scene file (.s3d)")
     e.add_argument("--host", default="builtin:coffee", help=_hosts_help())
     e.add_argument("-o", "--output", required=True, help="snapshot to write (.png; .jpg is lossy)")
-    e.add_argument("--strength", type=float, default=1.0, help="embedding strength: more survives more, shows more")
+    e.add_argument("--medium", default="print", choices=("print", "file"),
+                   help="print: a sheet to print and photograph (its own codec, numpy, about 1 s); file: a snapshot "
+                        "file shared digitally (the invertible network, torch)")
+    e.add_argument("--strength", type=float, default=1.0, help="embedding strength: more survives more, shows more "
+                                                               "(print: the host fidelity falls 20 log10(strength) dB)")
     e.add_argument("--jpeg-quality", type=int, default=95, help="quality when writing .jpg")
     e.add_argument("--refine", type=int, default=100,
-                   help="embed-time refinement steps against the restore network (0: the network's snapshot as is; "
-                        "more: better restores from the file and JPEG copies, about 0.4 s a step on 2 cores)")
+                   help="file medium: embed-time refinement steps against the restore network (0: the network's "
+                        "snapshot as is; more: better restores from the file and JPEG copies, about 0.4 s a step "
+                        "on 2 cores)")
     e.add_argument("--report", help="write a JSON report here (host_psnr, host_ssim, embed_ms)")
 
-    rs = _add(sub, "restore", "recover the scene from a snapshot file (torch)",
-              _run("snapshot3d.train.codec.commands", "restore_command"))
+    rs = _add(sub, "restore", "recover the scene from a snapshot file, with the codec its metadata names (no torch)",
+              _run("snapshot3d.viewer.commands", "restore_command"))
     rs.add_argument("snapshot", help="snapshot file (380x380 .png or .jpg with snapshot3d metadata)")
     rs.add_argument("-o", "--output", required=True, help="scene file to write (.s3d)")
     rs.add_argument("--meta", help="the sheet's QR text, when the file carries no metadata")
@@ -131,10 +148,13 @@ def _codec_parsers(sub) -> None:
     dest.add_argument("-o", "--output", help="photo file to write (.jpg)")
     dest.add_argument("--install", action="store_true",
                       help="overwrite the example photo the package ships (snapshot3d/assets/example-photo.jpg)")
+    mx.add_argument("--scene", default=None, help="scene file (default: the demo's, snapshot3d/assets/spot-print.s3d)")
+    mx.add_argument("--medium", default="print", choices=("print", "file"), help="the medium, as embed --medium")
     mx.add_argument("--host", default="builtin:chelsea", help=_hosts_help())
-    mx.add_argument("--severity", default="jpeg90", choices=SEVERITY_NAMES, help="simulated capture severity")
+    mx.add_argument("--severity", default="moderate", choices=SEVERITY_NAMES, help="simulated capture severity")
     mx.add_argument("--seed", type=int, default=0, help="random seed of the simulated capture")
-    mx.add_argument("--refine", type=int, default=100, help="embed-time refinement steps (as embed --refine)")
+    mx.add_argument("--refine", type=int, default=100, help="file medium: embed-time refinement steps (as embed "
+                                                           "--refine)")
 
 
 def build_parser() -> argparse.ArgumentParser:

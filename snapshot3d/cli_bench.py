@@ -56,21 +56,36 @@ def add_bench_commands(bsub, add) -> None:
     bh.add_argument("--severities", default="jpeg75,mild,moderate,severe", help="comma-separated severities")
     _quick(bh, seeds=1)
 
-    bc = add(bsub, "codec", "host fidelity vs restore_psnr through simulate+scan; baselines; charts",
+    bc = add(bsub, "codec", "a medium's codec: host fidelity vs restore_psnr through simulate+scan; baselines; "
+                            "charts (codec.* for the file medium, codec_print.* for the print medium)",
              _run("snapshot3d.bench.codec", "bench_codec_command"))
     _out(bc)
-    bc.add_argument("--scenes", default="snapshot3d/assets/spot.s3d,cache/scenes/lego.s3d",
-                    help="comma-separated scene files to evaluate (spot is never trained on)")
+    bc.add_argument("--medium", default="file", choices=("file", "print"), help="which medium's codec to measure")
+    bc.add_argument("--scenes", default=None,
+                    help="comma-separated scene files to evaluate (spot is never trained on; default: file "
+                         "snapshot3d/assets/spot.s3d,cache/scenes/lego.s3d; print bench/models/spot-print.s3d,"
+                         "bench/models/lego-print.s3d)")
     bc.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from training)")
     bc.add_argument("--headline", default="spot,lego", help="scenes (file stems) the summary's medians are over")
-    bc.add_argument("--seeds", type=int, default=3, help="simulated photos per physical severity")
+    bc.add_argument("--seeds", type=int, default=None, help="simulated photos per physical severity (default: file 3, "
+                                                             "print 6)")
     bc.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
     bc.add_argument("--refine", type=int, default=100, help="embed-time refinement steps of the ours-refined rows "
                                                            "and the side-by-side figure (0: neither)")
-    bc.add_argument("--strengths", default="0.5,0.75,1,1.5,2", help="embedding strengths of the trade-off sweep")
+    bc.add_argument("--strengths", default=None, help="embedding strengths of the trade-off sweep (default: file "
+                                                      "0.5,0.75,1,1.5,2; print 0.5,0.71,1,1.41,2)")
     bc.add_argument("--digital", default="bench/models/codec-digital.npz",
-                    help="baseline a: the codec trained without the channel")
-    _quick(bc, scenes="snapshot3d/assets/spot.s3d", hosts="coffee", seeds=1, size=48, refine=5, strengths="1")
+                    help="file medium, baseline a: the codec trained without the channel")
+    bc.add_argument("--heldout", type=int, default=4, help="print medium: photos of ../shared/data/hosts/heldout "
+                                                           "added to --hosts (0: none)")
+    bc.add_argument("--methods", default="print,print-front,file",
+                    help="print medium: rows to measure (print: the codec as decode runs it; print-front: a learned front-end before its despreader; "
+                         "file: the file codec on print captures)")
+    bc.add_argument("--payloads", default="bench/models/spot-r16c4.s3d,bench/models/spot-r24c4.s3d,"
+                                          "bench/models/spot-r32c4.s3d,bench/models/spot-r48c4.s3d,snapshot3d/assets/spot.s3d",
+                    help="print medium: spot at other plane sizes for the payload sweep")
+    _quick(bc, scenes=None, hosts="coffee", seeds=1, size=48, refine=5, strengths="1", heldout=0,
+           payloads="bench/models/spot-r32c4.s3d")
 
     bj = add(bsub, "codec-jpeg", "restore_psnr of a snapshot file through JPEG (4:2:0, 4:4:4), chroma "
                                  "subsampling, noise, blur and sub-pixel shifts, one at a time",
@@ -93,15 +108,21 @@ def add_bench_commands(bsub, add) -> None:
     _quick(bq, scenes="snapshot3d/assets/spot.s3d", hosts="coffee", seeds=1, size=48)
 
     bd = add(bsub, "decode", "torch-free decode of simulated photos: decode_ms per stage, restore_psnr, e2e_psnr; "
-                             "a speed/accuracy sweep and its chart; the quality estimate's calibration",
+                             "a speed/accuracy sweep and its chart; each codec's quality estimate calibrated",
              _run("snapshot3d.bench.decode", "bench_decode_command"))
     _out(bd)
+    bd.add_argument("--scene", default="snapshot3d/assets/spot-print.s3d", help="scene of the end-to-end photos "
+                                                                                 "and the sweep (print medium)")
     bd.add_argument("--seeds", type=int, default=20, help="simulated photos")
     bd.add_argument("--severity", default="moderate", choices=_SEVERITIES, help="simulated print-and-capture severity")
     bd.add_argument("--host", default="chelsea", help="bundled host photo (held out from codec training)")
-    bd.add_argument("--sweep-severity", default="jpeg90", choices=_SEVERITIES, help="capture the settings sweep runs on")
+    bd.add_argument("--sweep-severity", default="moderate", choices=_SEVERITIES, help="capture the settings sweep runs on")
     bd.add_argument("--repeats", type=int, default=3, help="timed decodes per sweep setting (median)")
-    bd.add_argument("--calib-seeds", type=int, default=4, help="captures per severity for the quality estimate's line")
-    bd.add_argument("--calibration", default=None,
-                    help="where to write that line (default: the package's file, which decode reads)")
-    _quick(bd, seeds=2, repeats=1, calib_seeds=1, calibration="bench/results/quick/quality-calibration.json")
+    bd.add_argument("--calib-scenes", default="bench/models/spot-print.s3d,bench/models/lego-print.s3d",
+                    help="scenes of the quality estimate's calibration captures")
+    bd.add_argument("--calib-seeds", type=int, default=3, help="captures per severity, scene and host for the "
+                                                               "quality estimate's lines")
+    bd.add_argument("--calibration-dir", default=None,
+                    help="where to write the lines (default: the package's assets, which decode reads)")
+    _quick(bd, seeds=2, repeats=1, calib_seeds=1, calib_scenes="bench/models/spot-print.s3d",
+           calibration_dir="bench/results/quick")

@@ -9,7 +9,8 @@ __all__ = [
     "ORBIT_VIEWS", "ORBIT_SIZE", "ORBIT_ELEVATION_DEG", "ORBIT_FOV_DEG", "WORLD_UP", "BACKGROUND",
     "DENSITY_CLAMP", "RENDER_STEPS_PER_BOX", "OCC_RES", "OCC_ALPHA_THRESHOLD", "KB",
     # sheet and scan (issue 3)
-    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "CODEC_ID", "CODEC_VERSION", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
+    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "FILE_CODEC", "PRINT_CODEC", "MEDIA", "MEDIUM_CODEC", "CODEC_MEDIUM",
+    "DEFAULT_MEDIUM", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
     "MARKER_GAP", "MARGIN_X", "MARGIN_Y", "COLUMN_LEFT", "COLUMN_RIGHT", "SHEET_BOX", "MARKER_ORIGINS",
     "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "QR_MAGIC", "QR_SEP", "QR_FIELDS",
 ]
@@ -49,7 +50,6 @@ KB = 1000                   # scene_kb is in kilobytes of 1000 bytes
 # layout scaled by an integer factor (each snapshot pixel printed as k x k dots).
 SNAPSHOT_SIZE = 380           # the codec's snapshot is SNAPSHOT_SIZE x SNAPSHOT_SIZE RGB (not ORBIT_SIZE)
 SHEET_FORMAT_VERSION = 1
-CODEC_ID = "hinet-1"          # the codec the QR code names (= CODEC_VERSION below)
 ARUCO_DICT = "DICT_4X4_50"    # cv2.aruco predefined dictionary of the sheet's markers
 # Marker ids by sheet format version; the four ids identify the format. Order: top-left, top-right,
 # bottom-right, bottom-left corner of the sheet (as seen upright).
@@ -85,12 +85,21 @@ QR_MAGIC = "S3D"
 QR_SEP = "|"
 QR_FIELDS = ("version", "codec", "box", "orbit")
 
-# --- the codec (issue 4) ---
+# --- media and their codecs (DESIGN 1.2) ---
+# A snapshot travels through one of two media, each with its own codec; the snapshot file's metadata and
+# the sheet's QR code name the codec, and decoding picks it from there (an unknown one is refused).
+PRINT_CODEC = "print-1"       # id of the print medium's codec (`snapshot3d.print_layout` + its restore network)
+MEDIA = ("print", "file")
+MEDIUM_CODEC = {"print": PRINT_CODEC, "file": "hinet-1"}
+CODEC_MEDIUM = {codec: medium for medium, codec in MEDIUM_CODEC.items()}
+DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is asked for as a file
+
+# --- the file medium's codec (issue 4) ---
 # The secret is the scene's planes, each channel spread over the whole wavelet grid of the snapshot
 # (CODEC_GRID x CODEC_GRID: SNAPSHOT_SIZE after CODEC_LEVELS Haar splits) by separable linear
 # interpolation, so that restoring a texel averages over about (CODEC_GRID / R)^2 grid cells. A codec carries planes up to
 # CODEC_MAX_RES x CODEC_MAX_RES with at most CODEC_CHANNELS channels; fewer channels are zero-padded.
-CODEC_VERSION = "hinet-1"     # id of the codec weights this build embeds and restores with
+FILE_CODEC = "hinet-1"        # id of the file medium's codec (weights, ONNX and QR name it)
 CODEC_CHANNELS = 8            # plane channels the secret has room for (3 planes -> 24 secret channels)
 CODEC_MAX_RES = 64            # largest plane resolution the codec carries
 CODEC_LEVELS = 2              # Haar splits of the shipped codec (its weights file stores its own config)

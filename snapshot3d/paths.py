@@ -17,6 +17,7 @@ def asset(name: str = "") -> Path:
 
 
 def model_file(kind: str) -> str:
-    """File name of an exported model: kind 'restore' (names the codec), 'project' or 'field' (name the decoder)."""
-    return {"restore": f"restore-{formats.CODEC_VERSION}.onnx", "project": f"project-{formats.DECODER_VERSION}.onnx",
-            "field": f"field-{formats.DECODER_VERSION}.onnx"}[kind]
+    """File name of an exported model: kind 'restore' (the file medium's restore network; names its codec),
+    'project' or 'field' (name the decoder)."""
+    return {"restore": f"restore-{formats.FILE_CODEC}.onnx",
+            "project": f"project-{formats.DECODER_VERSION}.onnx", "field": f"field-{formats.DECODER_VERSION}.onnx"}[kind]

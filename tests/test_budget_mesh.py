@@ -1,11 +1,11 @@
 """`--budget auto` selection and marching-cubes meshing on known inputs."""
 import numpy as np
 import pytest
-from snapshot3d.train.field.budget import choose_rung
-from snapshot3d.train.field.config import LADDER
 
 from snapshot3d.errors import UserError
 from snapshot3d.meshing import density_to_mesh, unit_grid
+from snapshot3d.train.field.budget import choose_rung, codec_psnr, expected_e2e
+from snapshot3d.train.field.config import LADDER, LADDER_PRINT
 
 
 def test_choose_smallest_rung_within_half_a_db():
@@ -15,6 +15,27 @@ def test_choose_smallest_rung_within_half_a_db():
     assert choose_rung(rungs, tolerance_db=0.7) == 2
     rungs[3]["field_psnr"] = 33.5  # the smallest is also the best
     assert choose_rung(rungs) == 3
+
+
+def test_a_medium_chooses_by_expected_e2e():
+    """Through a lossy medium the field's error and the codec's add: a bigger field can lose to a smaller one."""
+    assert expected_e2e(30.0, 30.0) == pytest.approx(26.99, abs=0.01)
+    assert expected_e2e(40.0, 80.0) == pytest.approx(40.0, abs=1e-3)
+    rungs = [{"scene_kb": 98, "field_psnr": 35.6, "codec_psnr": 18.0}, {"scene_kb": 12, "field_psnr": 31.2, "codec_psnr": 26.0},
+             {"scene_kb": 3, "field_psnr": 27.6, "codec_psnr": 26.5}]
+    for r in rungs:
+        r["e2e_expected"] = expected_e2e(r["field_psnr"], r["codec_psnr"])
+    assert choose_rung(rungs) == 0 and choose_rung(rungs, key="e2e_expected") == 1
+
+
+def test_print_curve_ships_and_falls_with_payload():
+    """The shipped print curve (bench codec --medium print, measured): the largest payload of the ladder
+    restores worst, and every rung reads a measured, plausible value."""
+    sizes = sorted({3 * c * r * r for r, c in LADDER_PRINT})
+    db = [codec_psnr("print", v) for v in sizes]
+    assert db[-1] == min(db) and db[0] - db[-1] > 2.0 and all(15 < v < 45 for v in db), db
+    with pytest.raises(UserError, match="no codec curve for medium 'paper'"):
+        codec_psnr("paper", 1000)
 
 
 def test_ladder_stays_within_the_papers_budget():

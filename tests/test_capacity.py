@@ -2,11 +2,11 @@
 import cv2
 import numpy as np
 import pytest
+
 from snapshot3d.bench.capacity import psnr_at
+from snapshot3d.metrics import psnr
 from snapshot3d.train.codec import capacity
 from snapshot3d.train.codec.oracle import oracle_correct
-
-from snapshot3d.metrics import psnr
 
 
 def test_subbands_are_orthonormal_and_check_the_size(rng):

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 import torch
-from snapshot3d.train.codec.channel import apply_channel, round_8bit
-from snapshot3d.train.codec.net import CodecNet, haar, ihaar
 
 from snapshot3d import codec_layout, formats
+from snapshot3d.train.codec.channel import apply_channel, round_8bit
+from snapshot3d.train.codec.net import CodecNet, haar, ihaar
 
 
 def _smooth_planes(rng, c=8, r=64):
@@ -85,11 +85,10 @@ def test_round_8bit_straight_through():
 
 
 def test_fine_tune_refuses_another_architecture(tmp_path):
+    from snapshot3d.errors import UserError
     from snapshot3d.train.codec.config import CodecConfig
     from snapshot3d.train.codec.hinet import codec_path
     from snapshot3d.train.codec.training import train_codec
-
-    from snapshot3d.errors import UserError
     with pytest.raises(UserError, match="another architecture"):
         train_codec(CodecConfig(blocks=2, init=str(codec_path())), None, tmp_path / "x.npz")
     with pytest.raises(UserError, match="jpeg-prob"):

@@ -30,13 +30,14 @@ JPEG75_SHORTFALL = pytest.mark.xfail(strict=True, reason="issue 4 shortfall: the
 
 
 @pytest.mark.parametrize("ext,quality,min_host,min_planes", [
-    (".png", 95, 32.0, 28.0),  # embed's default --refine 100: measured 31.5 dB (22.8 unrefined)
-    pytest.param(".jpg", 75, 32.0, 24.0, marks=JPEG75_SHORTFALL),
+    (".png", 95, 32.0, 28.0),  # --refine 20: measured 29.9 dB (31.5 at the default 100, 22.8 unrefined)
+    pytest.param(".jpg", 75, 32.0, 24.0, marks=[JPEG75_SHORTFALL, pytest.mark.slow]),  # 90 s to show a known gap
 ])
 def test_embed_restore_round_trip(tmp_path, ext, quality, min_host, min_planes):
+    """The file medium (20 refinement steps keep the test short; the default is 100)."""
     snap, out = tmp_path / f"snap{ext}", tmp_path / "back.s3d"
-    proc = run("embed", str(SPOT), "--host", "builtin:coffee", "-o", str(snap), "--jpeg-quality", str(quality),
-               "--report", str(tmp_path / "e.json"))
+    proc = run("embed", str(SPOT), "--medium", "file", "--refine", "20", "--host", "builtin:coffee", "-o", str(snap),
+               "--jpeg-quality", str(quality), "--report", str(tmp_path / "e.json"))
     assert proc.returncode == 0, proc.stderr
     rep = json.loads((tmp_path / "e.json").read_text())
     assert rep["host_psnr"] >= min_host and rep["host_ssim"] > 0.75, rep  # measured 33.4 dB, 0.81 (coffee)
@@ -53,7 +54,8 @@ def test_embed_restore_round_trip(tmp_path, ext, quality, min_host, min_planes):
 def test_embed_refuses_planes_the_codec_cannot_carry(tmp_path):
     scene = Scene(codes=np.zeros((3, 12, 64, 64), np.uint8), box=np.array([[-1] * 3, [1] * 3]), orbit=Orbit(3.0))
     save_scene(scene, tmp_path / "c12.s3d")
-    assert_one_line_error(run("embed", str(tmp_path / "c12.s3d"), "-o", str(tmp_path / "s.png")), "at most 8 channels")
+    assert_one_line_error(run("embed", str(tmp_path / "c12.s3d"), "--medium", "file", "-o", str(tmp_path / "s.png")),
+                          "at most 8 channels")
     assert not (tmp_path / "s.png").exists()
 
 
@@ -65,7 +67,7 @@ def test_restore_bad_inputs(tmp_path):
     cv2.imwrite(str(bare), np.zeros((380, 380, 3), np.uint8))
     assert_one_line_error(run("restore", str(bare), "-o", str(tmp_path / "x.s3d")), "no snapshot3d metadata")
     assert_one_line_error(run("restore", str(bare), "-o", str(tmp_path / "x.s3d"), "--meta",
-                        "S3D1|other-codec|b=-1,-1,-1,1,1,1|p=64,8"), "wrong codec id")
+                        "S3D1|other-codec|b=-1,-1,-1,1,1,1|p=64,8"), "unknown codec id")
     corrupt = tmp_path / "corrupt.png"
     corrupt.write_bytes(bare.read_bytes()[:500])
     assert_one_line_error(run("restore", str(corrupt), "-o", str(tmp_path / "x.s3d")), "corrupt")

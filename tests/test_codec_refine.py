@@ -3,14 +3,14 @@ back better from the snapshot file and from a JPEG-75 copy."""
 import cv2
 import numpy as np
 import pytest
-from snapshot3d.train.codec.commands import load_host
-from snapshot3d.train.codec.hinet import embed_planes, load_codec, restore_secret
-from snapshot3d.train.codec.refine import refine_snapshot
 
 from snapshot3d import codec_layout
 from snapshot3d.metrics import psnr
 from snapshot3d.paths import asset
+from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scene import load_scene_file
+from snapshot3d.train.codec.hinet import embed_planes, load_codec, restore_secret
+from snapshot3d.train.codec.refine import refine_snapshot
 
 
 @pytest.fixture(scope="module")
@@ -41,9 +41,8 @@ def test_refined_snapshot_restores_better_at_about_the_same_host(setup):
 
 
 def test_negative_refine_is_refused(setup):
-    from snapshot3d.train.codec.refine import snapshot_of
-
     from snapshot3d.errors import UserError
+    from snapshot3d.train.codec.refine import snapshot_of
 
     net, scene, host = setup
     with pytest.raises(UserError, match="--refine must be >= 0"):

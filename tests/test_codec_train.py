@@ -2,11 +2,11 @@
 import shutil
 
 import pytest
+
+from snapshot3d.paths import asset
 from snapshot3d.train.codec.config import CodecConfig
 from snapshot3d.train.codec.data import load_codec_data
 from snapshot3d.train.codec.training import train_codec
-
-from snapshot3d.paths import asset
 
 TINY = dict(blocks=1, width=8, layers=2, steps=50, batch=2, crop=32, lr=3e-3, full_every=0, ramp=0.0,
             holdout_scenes="", checkpoint_every=1000)

@@ -34,7 +34,8 @@ def test_decode_example_photo_without_torch(tmp_path):
     assert set(rep["timings_ms"]) >= {"scan", "restore", "bake", "render", "first_view"}
     assert rep["decode_ms"] >= rep["timings_ms"]["render"] > 0
     q = rep["quality_estimate"]
-    assert 30 < q["pilot_psnr_db"] < 100  # a JPEG-90 capture: the markers come through nearly intact
+    assert rep["codec"] == "print-1" and q["basis"] == "the codec's pilot carriers"
+    assert 0.05 < q["plane_rmse_expected"] < 0.5  # a moderate photo of a print: the pilots measure its noise
     assert 15 < q["restore_psnr_expected_db"] < 40 and q["calibration"]["held_out_rmse_db"] > 0
     mesh = trimesh.load(out / "mesh.glb", force="mesh")
     assert len(mesh.vertices) > 100
@@ -66,16 +67,17 @@ def test_demo_runs_without_torch(tmp_path):
     assert proc.returncode == 0, proc.stderr
     rep = json.loads((tmp_path / "demo" / "report.json").read_text())
     assert len(list((tmp_path / "demo" / "views").iterdir())) == 20
-    assert rep["restore_psnr"] >= 24.0, rep["restore_psnr"]  # the JPEG-90 capture of the sheet
+    assert rep["restore_psnr"] >= 23.5, rep["restore_psnr"]  # a moderate photo of the print: 24.95 dB when made
     assert "restore_psnr" in proc.stdout
 
 
 def test_embed_sheet_simulate_decode_end_to_end(tmp_path):
-    """Every stage on the command line: embed -> sheet -> simulate (jpeg90) -> decode (torch blocked)."""
+    """Every stage on the command line, file medium: embed -> sheet -> simulate (jpeg90) -> decode (torch blocked)."""
     def run(*args):
         proc = run_cli(*args)
         assert proc.returncode == 0, proc.stderr
-    run("embed", str(ASSETS / "spot.s3d"), "--host", "builtin:chelsea", "-o", str(tmp_path / "snap.png"))
+    run("embed", str(ASSETS / "spot.s3d"), "--medium", "file", "--refine", "20", "--host", "builtin:chelsea", "-o",
+        str(tmp_path / "snap.png"))
     run("sheet", str(tmp_path / "snap.png"), "-o", str(tmp_path / "sheet.png"))
     run("simulate", str(tmp_path / "sheet.png"), "-o", str(tmp_path / "photo.jpg"), "--severity", "jpeg90")
     proc = run_blocked("decode", str(tmp_path / "photo.jpg"), "-o", str(tmp_path / "out"), "--views", "3",
@@ -83,12 +85,11 @@ def test_embed_sheet_simulate_decode_end_to_end(tmp_path):
     assert proc.returncode == 0, proc.stderr
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     assert rep["planes"] == [64, 8] and rep["scan"]["qr"]["codec"] == "hinet-1"
-    from snapshot3d.viewer.render import render_views
-    from snapshot3d.viewer.runtime import field_models
-
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.metrics import psnr
     from snapshot3d.scene import load_scene_file
+    from snapshot3d.viewer.render import render_views
+    from snapshot3d.viewer.runtime import field_models
     back, orig = load_scene_file(tmp_path / "out" / "scene.s3d"), load_scene_file(ASSETS / "spot.s3d")
     np.testing.assert_allclose(back.box, orig.box, rtol=1e-3)
     c2w, intr = orbit_cameras(orig.orbit, 3, 64)

@@ -5,6 +5,8 @@ import numpy as np
 import onnx
 import onnxruntime as ort
 import torch
+
+from snapshot3d import formats
 from snapshot3d.export.onnx_export import (
     OPSET,
     export_field,
@@ -17,8 +19,6 @@ from snapshot3d.train.field.decoder import load_decoder
 from snapshot3d.train.field.field import decode, sample_planes
 from snapshot3d.viewer.bake import cell_coords, grid_field
 from snapshot3d.viewer.runtime import FieldModels
-
-from snapshot3d import formats
 
 
 def _export_field_models(tmp_path):
@@ -59,7 +59,7 @@ def test_exported_models_match_torch_on_real_inputs(tmp_path):
     project, field = _export_field_models(tmp_path)
     assert size < 5e6
     meta = {p.key: p.value for p in onnx.load(str(restore)).metadata_props}
-    assert meta["codec_id"] == formats.CODEC_ID and meta["orbit_views"] == str(formats.ORBIT_VIEWS)
+    assert meta["codec_id"] == formats.FILE_CODEC and meta["orbit_views"] == str(formats.ORBIT_VIEWS)
     assert field_parity(project, field)["views_max_abs_diff"] <= 1e-3
     r = restore_parity(restore, project, field)
     assert r["restore_psnr_diff_db"] <= 0.05 and r["restore_psnr_onnx"] > 20, r

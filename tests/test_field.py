@@ -1,6 +1,8 @@
 """The field's functional core: compositing, plane sampling, ray-box clipping, empty-space skipping."""
 import numpy as np
 import torch
+
+from snapshot3d import formats
 from snapshot3d.train.field.field import (
     Decoder,
     TriPlanes,
@@ -11,8 +13,6 @@ from snapshot3d.train.field.field import (
 )
 from snapshot3d.train.field.render import occupancy_from_planes, render_rays
 from snapshot3d.train.field.sampler import BoxFrame, march, ray_box
-
-from snapshot3d import formats
 
 
 def test_transmittance_cumsum_equals_cumprod():

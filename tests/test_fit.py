@@ -2,14 +2,14 @@
 import numpy as np
 import pytest
 import torch
+
+from snapshot3d.builtin import builtin_scene
+from snapshot3d.scene import dequantize_planes
 from snapshot3d.train.field.config import FitConfig
 from snapshot3d.train.field.decoder import load_decoder
 from snapshot3d.train.field.evaluate import evaluate_planes
 from snapshot3d.train.field.field import TriPlanes
 from snapshot3d.train.field.fit import fit
-
-from snapshot3d.builtin import builtin_scene
-from snapshot3d.scene import dequantize_planes
 
 CFG = FitConfig(plane_res=32, plane_channels=4, steps=150, batch_rays=2048, occ_warmup=40, checkpoint_every=50)
 

@@ -5,6 +5,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from snapshot3d import formats
+from snapshot3d.cameras import orbit_cameras
+from snapshot3d.metrics import psnr
+from snapshot3d.scene import load_scene_file
 from snapshot3d.viewer.bake import (
     Baked,
     _atlas,
@@ -17,11 +22,6 @@ from snapshot3d.viewer.bake import (
 from snapshot3d.viewer.march import Frame
 from snapshot3d.viewer.render import RenderConfig, composite, pad_planes, render_views
 from snapshot3d.viewer.runtime import field_models
-
-from snapshot3d import formats
-from snapshot3d.cameras import orbit_cameras
-from snapshot3d.metrics import psnr
-from snapshot3d.scene import load_scene_file
 
 SPOT = Path(str(resources.files("snapshot3d") / "assets")) / "spot.s3d"
 

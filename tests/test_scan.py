@@ -9,16 +9,16 @@ import zlib
 import cv2
 import numpy as np
 import pytest
-from snapshot3d.scanner.detect import detect_markers
-from snapshot3d.scanner.qr import SheetMeta
-from snapshot3d.scanner.scan import REPORT_KEYS, scan_image
-from snapshot3d.scanner.sheet import render_sheet
-from snapshot3d.scanner.simulate import simulate
 
 from snapshot3d import formats
 from snapshot3d.builtin import shared_data_dir
 from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr
+from snapshot3d.scanner.detect import detect_markers
+from snapshot3d.scanner.qr import SheetMeta
+from snapshot3d.scanner.scan import REPORT_KEYS, scan_image
+from snapshot3d.scanner.sheet import render_sheet
+from snapshot3d.scanner.simulate import simulate
 
 N = formats.SNAPSHOT_SIZE
 
@@ -51,7 +51,7 @@ def test_lossless_round_trip(sheet, snapshot):
     res = scan_image(img)
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) >= 40.0
     assert np.abs(res.corners - np.array(truth["corners"])).max() < 0.05
-    assert res.qr == {"version": 1, "codec": formats.CODEC_ID, "box": [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0],
+    assert res.qr == {"version": 1, "codec": formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM], "box": [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0],
                       "orbit": [3.0, 20.0, 40.0], "target": None, "planes": None, "strength": None}
     assert tuple(res.report()) == REPORT_KEYS and res.confidence > 0.9
 
@@ -72,12 +72,12 @@ def test_mild_corners_subpixel(sheet, snapshot, seed):
     assert _snapshot_px_error(res.corners, true).max() <= 0.3
     assert np.linalg.norm(res.corners - true, axis=1).max() <= 0.3 * 3  # and under a pixel of the photo
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) > 18.0
-    assert res.qr is not None and res.qr["codec"] == formats.CODEC_ID
+    assert res.qr is not None and res.qr["codec"] == formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM]
 
 
 def test_wrong_codec_in_qr(snapshot):
     sheet = render_sheet(snapshot, SheetMeta(codec="hinet-9"), 2)
-    with pytest.raises(UserError, match="wrong codec id.*hinet-9"):
+    with pytest.raises(UserError, match="unknown codec id .hinet-9."):
         scan_image(cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
 
 

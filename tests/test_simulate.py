@@ -4,14 +4,14 @@ import time
 import cv2
 import numpy as np
 import pytest
+
+from snapshot3d import formats
 from snapshot3d.scanner import layout
 from snapshot3d.scanner.detect import detect_markers
 from snapshot3d.scanner.presets import PRESETS
 from snapshot3d.scanner.qr import SheetMeta
 from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import blur_kernel, simulate
-
-from snapshot3d import formats
 
 
 @pytest.fixture(scope="module")

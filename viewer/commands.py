@@ -13,7 +13,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.images import contact_sheet, write_gif, write_png, write_views
 from snapshot3d.outputs import staged_folder
 
-__all__ = ["decode_command", "write_outputs", "decoded_mesh", "POOR_DB"]
+__all__ = ["decode_command", "restore_command", "write_outputs", "decoded_mesh", "POOR_DB"]
 
 POOR_DB = 22.0
 """below this expected restore_psnr, decode warns that the views will be poor"""
@@ -47,7 +47,7 @@ def _quality_lines(q: dict) -> list[str]:
     expected = q.get("restore_psnr_expected_db")
     if expected is None:
         return [f"quality estimate: none (no calibration shipped); markers pilot_psnr {q['pilot_psnr_db']:.1f} dB"]
-    lines = [f"quality estimate: restore_psnr about {expected:.1f} dB (from the sheet's markers, "
+    lines = [f"quality estimate: restore_psnr about {expected:.1f} dB (from {q['basis']}, "
              f"typical error {q['calibration']['held_out_rmse_db']:.1f} dB)"]
     if expected < POOR_DB:
         lines.append("warning: the views will be poor (blurred or wrong shapes): retake the photo with even light, "
@@ -79,4 +79,37 @@ def decode_command(args) -> int:
           f"{r['timings_ms']['render']:.0f}); wrote {args.output}/")
     for line in _quality_lines(r["quality_estimate"]):
         print(line)
+    return 0
+
+
+def restore_command(args) -> int:
+    """`snapshot3d restore SNAPSHOT -o scene.s3d`: the scene back from a snapshot file (no torch)."""
+    import time
+
+    from snapshot3d.progress import progress
+    from snapshot3d.reports import write_json
+    from snapshot3d.scanner.qr import check_codec
+    from snapshot3d.scanner.snapfile import read_snapshot
+    from snapshot3d.scene import quantize_planes, save_scene
+
+    from .decode import scene_from_meta
+    from .media import restore_planes
+
+    if Path(args.output).suffix.lower() != ".s3d":
+        raise UserError(f"cannot write {Path(args.output).name}: a scene is written as .s3d")
+    with progress(2, "restore", unit="stage") as bar:
+        rgb, meta = read_snapshot(args.snapshot, args.meta)
+        check_codec(meta)
+        t0 = time.perf_counter()
+        planes, info = restore_planes(rgb, meta)
+        secs = time.perf_counter() - t0
+        bar.update(1)
+        scene = scene_from_meta(quantize_planes(planes), meta)
+        scene.name = Path(args.snapshot).stem
+        save_scene(scene, args.output)
+        bar.update(1)
+    report = {"restore_ms": secs * 1000, "planes": list(meta.planes), "codec": meta.codec, **info}
+    write_json(args.report, report)
+    print(f"wrote {args.output}: {meta.planes[0]}x{meta.planes[0]} planes, {meta.planes[1]} channels, codec "
+          f"{meta.codec}; restore {secs * 1000:.0f} ms")
     return 0

@@ -11,18 +11,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from snapshot3d import codec_layout, formats
+from snapshot3d import formats
 from snapshot3d.cameras import orbit_cameras
 from snapshot3d.errors import UserError
-from snapshot3d.scene import Orbit, Scene, dequantize_planes, quantize_planes
+from snapshot3d.scene import Orbit, Scene, quantize_planes
 
 from .bake import Baked, bake_field
 from .march import Frame
+from .media import restore_planes
 from .quality import quality_estimate
 from .render import RenderConfig, pad_planes, render_views
-from .runtime import field_models, model_path, session
+from .runtime import field_models
 
-__all__ = ["Decoded", "decode_photo", "restore_planes", "scene_from_meta"]
+__all__ = ["Decoded", "decode_photo", "scene_from_meta"]
 
 
 @dataclass
@@ -31,14 +32,6 @@ class Decoded:
     scene: Scene
     report: dict
     baked: Baked
-
-
-def restore_planes(snapshot: np.ndarray, res: int, channels: int, strength: float = 1.0):
-    """snapshot (380, 380, 3) uint8 RGB -> planes (3, C, R, R) float32 (8-bit values, as carried)."""
-    x = (snapshot.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
-    secret = session(str(model_path("restore"))).run(None, {"snapshot": np.ascontiguousarray(x)})[0][0] / strength
-    planes = codec_layout.secret_to_planes(secret, res, channels)
-    return dequantize_planes(quantize_planes(planes))
 
 
 def scene_from_meta(codes: np.ndarray, meta) -> Scene:
@@ -72,7 +65,7 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
     res = scan_file(path)
     meta = _meta(res.qr)
     t1 = time.perf_counter()
-    planes = restore_planes(res.snapshot, *meta.planes, meta.strength or 1.0)
+    planes, codec_info = restore_planes(res.snapshot, meta)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
     models = field_models()
@@ -94,7 +87,8 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
         "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3), "render": ms(t3, t4),
                        "first_view": ms(t0, first[0]) if first else None},
         "decode_ms": ms(t0, t4),
-        "quality_estimate": quality_estimate(res.pilot_psnr),
+        "codec": meta.codec, "medium": formats.CODEC_MEDIUM[meta.codec],
+        "quality_estimate": quality_estimate(meta.codec, res.pilot_psnr, codec_info.get("plane_rmse_expected")),
         "planes": list(meta.planes), "views": views, "size": size, "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
         "scan": {k: v for k, v in res.report().items() if k in ("corners", "reprojection_px", "qr")},

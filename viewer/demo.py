@@ -1,6 +1,7 @@
-"""`snapshot3d demo`: decode the bundled example photo (the bundled spot scene hidden in a bundled host
-photo, put on a sheet and captured by the simulator as a JPEG-90 file; `snapshot3d make-example`) and
-measure `restore_psnr` against the bundled original scene. numpy, OpenCV and onnxruntime only."""
+"""`snapshot3d demo`: decode the bundled example photo (the bundled print-sized spot scene hidden in a
+bundled host photo, put on a sheet, printed and photographed by the simulator at `moderate`;
+`snapshot3d make-example`) and measure `restore_psnr` against the bundled original scene. numpy, OpenCV and
+onnxruntime only."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,7 +14,7 @@ from snapshot3d.scene import load_scene_file
 __all__ = ["demo_command", "EXAMPLE_PHOTO", "EXAMPLE_SCENE"]
 
 EXAMPLE_PHOTO = "example-photo.jpg"
-EXAMPLE_SCENE = "spot.s3d"
+EXAMPLE_SCENE = "spot-print.s3d"
 
 
 def demo_command(args) -> int:
@@ -26,8 +27,8 @@ def demo_command(args) -> int:
 
     photo, original = asset(EXAMPLE_PHOTO), load_scene_file(asset(EXAMPLE_SCENE))
     out = Path(args.output)
-    print(f"decoding the bundled example {photo.name} (the sheet captured as a JPEG-90 file by the simulator; "
-          f"physical prints do not survive the current codec well, see bench/results/codec.json) ...", flush=True)
+    print(f"decoding the bundled example {photo.name} (a phone photo of a printed sheet, made by the simulator at "
+          f"severity moderate) ...", flush=True)
     dec = decode_photo(photo)
     c2w, intr = orbit_cameras(original.orbit, formats.ORBIT_VIEWS, formats.ORBIT_SIZE)
     ref = render_views(field_models(), original.planes(), original.box, c2w, intr,
@@ -41,8 +42,8 @@ def demo_command(args) -> int:
           f"{r['timings_ms']['first_view']:.0f})")
     q = r["quality_estimate"]
     expected = "no calibration" if q["restore_psnr_expected_db"] is None else f"{q['restore_psnr_expected_db']:.1f} dB"
-    print(f"restore_psnr {r['restore_psnr']:.2f} dB against the original scene's views (expected from the sheet's "
-          f"markers alone, without ground truth: {expected}; pilot_psnr {q['pilot_psnr_db']:.1f} dB)")
+    print(f"restore_psnr {r['restore_psnr']:.2f} dB against the original scene's views (expected from "
+          f"{q['basis']} alone, without ground truth: {expected})")
     print(f"wrote {out}/views/000-{len(dec.views) - 1:03d}.png, {out}/turntable.gif, {out}/contact.png, "
           f"{out}/report.json")
     return 0

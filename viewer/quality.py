@@ -1,33 +1,51 @@
-"""The decode's quality estimate without ground truth: the sheet's markers as a pilot signal
-(`scanner.pilot.pilot_psnr`), mapped to the `restore_psnr` it predicts by a straight line fitted by
-`snapshot3d bench decode` on simulated captures of every severity (the calibration ships with the
-package, one per codec). numpy only."""
+"""The decode's quality estimate without ground truth: the `restore_psnr` a decode can expect, from what
+the capture itself says. Each codec ships a calibration written by `snapshot3d bench decode`:
+- print medium: the codec's own pilots measure the gain and the noise of this capture, hence the planes'
+  expected error (`print_layout.Reading.plane_rmse`); a line in its logarithm gives the restore_psnr;
+- file medium: the sheet's ArUco markers are a pilot signal that went through the same channel
+  (`scanner.pilot.pilot_psnr`); a line in it gives the restore_psnr.
+numpy only."""
 from __future__ import annotations
 
 import json
+import math
 from functools import lru_cache
 
 from snapshot3d import formats
 from snapshot3d.paths import asset
 
-__all__ = ["CALIBRATION_FILE", "load_calibration", "quality_estimate"]
-
-CALIBRATION_FILE = f"quality-{formats.CODEC_VERSION}.json"
+__all__ = ["calibration_file", "load_calibration", "quality_estimate"]
 
 
-@lru_cache(maxsize=1)
-def load_calibration() -> dict | None:
-    """{"slope", "intercept", "pilot_range", "fit": {...}} or None when the package has none."""
-    path = asset(CALIBRATION_FILE)
+def calibration_file(codec: str) -> str:
+    return f"quality-{codec}.json"
+
+
+@lru_cache(maxsize=4)
+def load_calibration(codec: str) -> dict | None:
+    """{"predictor", "slope", "intercept", "range", held-out errors, "source"} or None when not shipped."""
+    path = asset(calibration_file(codec))
     return json.loads(path.read_text()) if path.is_file() else None
 
 
-def quality_estimate(pilot_psnr: float) -> dict:
-    cal = load_calibration()
-    out = {"pilot_psnr_db": round(float(pilot_psnr), 2), "restore_psnr_expected_db": None, "calibration": None}
-    if cal is not None:
-        lo, hi = cal["pilot_range"]
-        p = min(max(float(pilot_psnr), lo), hi)  # no extrapolation past what was measured
-        out["restore_psnr_expected_db"] = round(cal["intercept"] + cal["slope"] * p, 2)
-        out["calibration"] = {k: cal[k] for k in ("held_out_corr", "held_out_rmse_db", "source")}
+def predictor_value(codec: str, pilot_psnr: float, plane_rmse: float | None) -> float | None:
+    """The number a codec's calibration line reads: log10 of the expected plane RMS error (print), or the
+    markers' pilot_psnr in dB (file)."""
+    if formats.CODEC_MEDIUM.get(codec) == "print":
+        return math.log10(max(plane_rmse, 1e-6)) if plane_rmse is not None else None
+    return float(pilot_psnr)
+
+
+def quality_estimate(codec: str, pilot_psnr: float, plane_rmse: float | None = None) -> dict:
+    cal = load_calibration(codec)
+    x = predictor_value(codec, pilot_psnr, plane_rmse)
+    print_codec = formats.CODEC_MEDIUM.get(codec) == "print"
+    out = {"pilot_psnr_db": round(float(pilot_psnr), 2), "plane_rmse_expected": plane_rmse,
+           "basis": "the codec's pilot carriers" if print_codec else "the sheet's markers",
+           "restore_psnr_expected_db": None, "calibration": None}
+    if cal is not None and x is not None:
+        lo, hi = cal.get("range") or cal["pilot_range"]
+        x = min(max(x, lo), hi)  # no extrapolation past what was measured
+        out["restore_psnr_expected_db"] = round(cal["intercept"] + cal["slope"] * x, 2)
+        out["calibration"] = {k: cal.get(k) for k in ("predictor", "held_out_corr", "held_out_rmse_db", "source")}
     return out

@@ -15,10 +15,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
-from snapshot3d.scanner.backgrounds import background_names, load_background
 
 from snapshot3d import codec_layout, formats
 from snapshot3d.images import fit_square
+from snapshot3d.scanner.backgrounds import background_names, load_background
 from snapshot3d.scene import Scene, load_scene_file
 
 __all__ = ["CodecData", "load_codec_data", "crop_batch", "full_sample", "augment_planes"]

@@ -1,6 +1,6 @@
 """The codec in torch: weights in and out, and the two operations a user runs.
 
-Weights live in the package as `assets/codec-<CODEC_VERSION>.npz` (the state dict as numpy arrays
+Weights live in the package as `assets/codec-<FILE_CODEC>.npz` (the state dict as numpy arrays
 plus the config as JSON) beside a JSON summary of the run that made them.
 
 `embed_planes`: host (380, 380, 3) float RGB in [0, 1] and planes (3, C, R, R) in [-1, 1] ->
@@ -9,17 +9,15 @@ snapshot (380, 380, 3) uint8 RGB. `restore_secret`: snapshot (380, 380, 3) uint8
 """
 from __future__ import annotations
 
-import json
-from dataclasses import asdict, fields
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from snapshot3d import codec_layout, formats
-from snapshot3d.errors import UserError
 from snapshot3d.paths import asset
 
+from ..weights import load_weights, save_weights
 from .config import CodecConfig
 from .net import CodecNet
 
@@ -35,40 +33,19 @@ def secret_grid(net: CodecNet) -> int:
     return formats.SNAPSHOT_SIZE >> net.levels
 
 
-def codec_path(version: str = formats.CODEC_VERSION) -> Path:
+def codec_path(version: str = formats.FILE_CODEC) -> Path:
     return asset(f"codec-{version}.npz")
 
 
 def save_codec(net: CodecNet, cfg: CodecConfig, path: Path) -> None:
     """Atomic write of the weights (float32) and the config they were built from."""
-    path = Path(path)
-    arrays = {k: v.detach().cpu().float().numpy() for k, v in net.state_dict().items()}
-    arrays["__config__"] = np.frombuffer(json.dumps(asdict(cfg)).encode(), np.uint8)
-    tmp = path.with_name(path.name + ".partial")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-    tmp.replace(path)
+    save_weights(net, cfg, path)
 
 
 def load_codec(path: Path | None = None) -> tuple[CodecNet, CodecConfig]:
     """The codec in eval mode with frozen weights (default: the package's)."""
-    path = Path(path) if path else codec_path()
-    if not path.is_file():
-        raise UserError(f"codec weights not found: {path}; run 'snapshot3d train codec'")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = dict(z)
-        raw = json.loads(arrays.pop("__config__").tobytes().decode())
-    except (OSError, ValueError, KeyError) as e:
-        raise UserError(f"{path} is not a codec weights file ({type(e).__name__})") from None
-    known = {f.name for f in fields(CodecConfig)}
-    cfg = CodecConfig(**{k: v for k, v in raw.items() if k in known})
-    net = build_codec(cfg)
-    net.load_state_dict({k: torch.from_numpy(v) for k, v in arrays.items()})
-    net.eval()
-    for p in net.parameters():
-        p.requires_grad_(False)
-    return net, cfg
+    return load_weights(Path(path) if path else codec_path(), CodecConfig, build_codec, "codec",
+                        "snapshot3d train codec")
 
 
 def _check_host(host: np.ndarray) -> None:

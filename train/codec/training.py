@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
+
+from snapshot3d import codec_layout, formats
+from snapshot3d.errors import UserError
 from snapshot3d.train.field.commands import orbit_cameras
 from snapshot3d.train.field.decoder import load_decoder
 from snapshot3d.train.field.rays import view_rays
 from snapshot3d.train.field.render import occupancy_from_planes, render_rays
 from snapshot3d.train.field.sampler import BoxFrame
-
-from snapshot3d import codec_layout, formats
-from snapshot3d.errors import UserError
 
 from .channel import ChannelRanges, apply_channel, curriculum_level, round_8bit
 from .config import CodecConfig

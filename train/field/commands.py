@@ -52,7 +52,7 @@ def _default_orbit(posed) -> Orbit:
 
 
 def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int = 1, checkpoint=None,
-              size: int = 200, quiet: bool = False, device=None):
+              size: int = 200, quiet: bool = False, device=None, medium: str | None = None):
     """Load, fit (on `device`, None: the CPU) and evaluate. Returns (Scene, report dict, held-out renders)."""
     from snapshot3d.loaders import load_scene
     from snapshot3d.scene import dequantize_planes
@@ -71,13 +71,14 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     bars = None if quiet else _bar
     report = {}
     if budget == "auto":
-        chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device)
+        chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device, medium=medium)
         codes = rungs[chosen]["codes"]
         ev = {k: rungs[chosen][k] for k in ("field_psnr", "field_ssim")}
         steps = cfg.steps
         ev["renders"] = None
-        report["ladder"] = [{k: r[k] for k in ("plane_res", "plane_channels", "scene_kb", "field_psnr", "fit_seconds")}
-                            for r in rungs]
+        report["ladder"] = [{k: r[k] for k in ("plane_res", "plane_channels", "scene_kb", "field_psnr", "codec_psnr",
+                                               "e2e_expected", "fit_seconds") if k in r} for r in rungs]
+        report["medium"] = medium
     elif budget == "fixed":
         res = fit(posed, decoder, cfg, checkpoint=checkpoint, progress=bars("fit", cfg.steps) if bars else None,
                   device=device)
@@ -89,7 +90,9 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         raise UserError(f"--budget must be 'fixed' or 'auto', not {budget!r}")
     seconds = time.perf_counter() - t0
     scene = Scene(codes=codes, box=posed.box, orbit=_default_orbit(posed), name=posed.name,
-                  meta={"source": spec, "train_views": int(len(posed.train)), "test_views": int(len(posed.test))})
+                  meta={"source": spec, "train_views": int(len(posed.train)), "test_views": int(len(posed.test)),
+                        **({"size": size} if spec.startswith("builtin:") else {"downscale": downscale}),
+                        **({"medium": medium} if medium else {})})
     report = {"field_psnr": round(float(ev["field_psnr"]), 3), "field_ssim": round(float(ev["field_ssim"]), 4),
               "scene_kb": round(scene.scene_kb, 2), "fit_seconds": round(seconds, 1), "steps": steps,
               "plane_res": scene.resolution, "plane_channels": scene.channels, **report}
@@ -106,8 +109,11 @@ def fit_command(args) -> int:
         ckpt.unlink()
     from ..device import resolve_device
 
+    if args.medium and args.budget != "auto":
+        raise UserError("--medium chooses the plane size with --budget auto; with --budget fixed give --plane-res "
+                        "and --plane-channels")
     scene, report, _ = fit_scene(args.scene, cfg, args.budget, args.downscale, ckpt, size=args.size,
-                                 device=resolve_device(args.device))
+                                 device=resolve_device(args.device), medium=args.medium)
     throughput = report.pop("_throughput", None)
     save_scene(scene, out)
     if ckpt is not None and ckpt.exists():

@@ -10,7 +10,7 @@ from snapshot3d import formats
 from snapshot3d.errors import UserError
 from snapshot3d.options import config_field
 
-__all__ = ["FitConfig", "DecoderConfig", "LADDER", "check_fit_config"]
+__all__ = ["FitConfig", "DecoderConfig", "LADDER", "LADDER_PRINT", "check_fit_config"]
 
 
 @dataclass
@@ -69,3 +69,6 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
 
 # `fit --budget auto`: (plane_res, plane_channels) from large to small; all within the paper's 160 kB.
 LADDER = ((64, 12), (64, 8), (48, 8), (48, 4), (32, 4))
+# `fit --budget auto --medium print`: a photographed print carries about a hundred times less than a file
+# (bench capacity), so its ladder goes further down
+LADDER_PRINT = ((64, 8), (48, 4), (32, 4), (24, 4), (16, 4))

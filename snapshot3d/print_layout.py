@@ -1,0 +1,334 @@
+"""The `print` medium's carriers (numpy; torch-free): where and how a scene's planes sit in a snapshot
+that is printed and photographed, and how they are read back.
+
+Source side: each plane channel (R x R) is taken to the frequency domain by an orthonormal 2-D DCT. A
+scene's plane values are smooth, so their energy sits in the low frequencies; a fixed prior spectrum
+`prior_spectrum(R)` (fitted on the training scenes, in cycles per plane, so one prior serves every R)
+sets how much power each coefficient gets: the linear minimum-MSE allocation for a Gaussian source over
+a noisy channel (`allocate`), which gives nothing to coefficients the channel could not carry above its
+noise (they restore as 0). Pilots, carriers of known value, come first: the decoder measures the gain
+and the noise of this very capture from them.
+
+Channel side: every carrier is a pseudo-random +-1 pattern over `chips` coefficients drawn from the
+whole snapshot's detail bands (`snapshot3d.bands`: opponent colours x two Haar levels; the coarse band
+is left to the host), so each plane coefficient is averaged over many places and a glare spot or a
+shadow costs each a little. Carriers use disjoint coefficients, so they are orthonormal. The embedder
+knows the host, so it cancels the host's own projection on each carrier (improved spread spectrum,
+Malvar and Florencio 2003): the decoder sees the carrier's value plus channel noise, not the host.
+Clipping to [0, 1] and 8-bit rounding are corrected by a few projection rounds (`embed`).
+
+Layouts: planes (3, C, R, R) float in [-1, 1] (`formats.PLANE_NAMES` order); images (380, 380, 3) RGB,
+uint8 or float in [0, 1]; carrier values (N,) float, pilots first.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from . import bands, formats
+
+__all__ = ["PrintLayout", "print_layout", "prior_spectrum", "allocate", "embed", "despread", "restore",
+           "Reading", "PRINT_BANDS", "DESIGN_NOISE", "PAYLOAD_RMS", "PILOTS", "HOST_PSNR", "READ_NOISE", "cancel_share",
+           "check_print_planes", "random_planes", "noise_map", "band_noise", "PRINT_NOISE"]
+
+# detail bands that carry the payload, with their relative energy per coefficient: the luma band of
+# 4-pixel cells, the finest luma band (horizontal and vertical) and the red-green band of 4-pixel cells.
+# Chosen by measurement (README "The print codec"): the finest chroma bands are blurred away by print
+# and lens, the coarser (8-pixel) bands carry too much of the host's own texture, which the decoder must
+# then treat as noise or the embedder must pay to cancel
+PRINT_BANDS = {"Y2LH": 1.0, "Y2HL": 1.0, "Y2HH": 1.0, "Y1LH": 0.5, "Y1HL": 0.5, "RG2LH": 0.5, "RG2HL": 0.5}
+READ_NOISE = 0.003
+"""channel noise per carrier reading (at the payload's design scale) the host cancellation is weighed
+against (`moderate` photos)"""
+DESIGN_NOISE = 0.03
+"""noise power per unit-energy carrier, referred to the input, that the allocation is designed for: what
+`moderate` photos leave once the host's interference is counted (chosen by measurement, README "The print
+codec"; a lower value spreads the payload over more plane frequencies than the print carries)"""
+PAYLOAD_RMS = 0.02
+"""RMS of the payload per pixel value at strength 1 (before the host cancellation and clipping)"""
+HOST_PSNR = 32.0
+"""host fidelity of a print snapshot (dB): the payload's power is scaled to it"""
+PILOTS = 256
+"""pilot carriers: known values from which the decoder measures gain and noise"""
+_PILOT_SHARE = 0.02   # of the payload power
+_SEED = 20261123
+
+
+def check_print_planes(channels: int, res: int) -> None:
+    """ValueError unless the print codec carries (3, channels, res, res) planes."""
+    if not (1 <= channels <= formats.C_MAX and 4 <= res <= formats.CODEC_MAX_RES):
+        raise ValueError(f"the print codec carries planes of 4x4 to {formats.CODEC_MAX_RES}x{formats.CODEC_MAX_RES} "
+                         f"with 1 to {formats.C_MAX} channels; this scene has {channels} channels of {res}x{res}")
+
+
+def prior_spectrum(res: int) -> np.ndarray:
+    """(res, res) expected square of each DCT coefficient of a plane channel (index [v, u]): a scene's
+    planes as measured on fitted scenes, 15 f^-2.1 at f cycles per plane width (f >= 0.5) and 40 for the
+    DC at R = 32; the same continuous spectrum at every resolution, so the coefficients of the orthonormal
+    DCT grow as R^2."""
+    u = np.arange(res, dtype=np.float64)
+    f = np.hypot(u[None, :], u[:, None]) / 2.0          # cycles per plane width
+    s = 15.0 * np.maximum(f, 0.5) ** -2.1
+    s[0, 0] = 40.0
+    return s * (res / 32.0) ** 2
+
+
+def allocate(lam: np.ndarray, total: float, noise: float) -> np.ndarray:
+    """Power per coefficient p (same shape as lam) with sum(p) = total minimising sum(lam / (1 + p / noise))
+    (linear MMSE over a channel of noise `noise`): p = max(0, sqrt(lam * noise / mu) - noise)."""
+    lo, hi = 1e-16, 1e16
+    for _ in range(200):
+        mu = np.sqrt(lo * hi)
+        p = np.maximum(0.0, np.sqrt(lam * noise / mu) - noise)
+        lo, hi = (mu, hi) if p.sum() > total else (lo, mu)
+    return p * (total / max(p.sum(), 1e-30))
+
+
+@dataclass(frozen=True)
+class PrintLayout:
+    """The carriers of one plane size. chips (N, K) int: coefficient indices of each carrier in the flat
+    pool of `PRINT_BANDS`; base (N, K) float: the carrier's entries before the host's brightness shapes
+    them (a random sign times the square root of its band's weight); coef (M,) int: the flat DCT
+    coefficient (of 3*C*R*R, plane-major) each non-pilot carrier holds; scale (M,): its amplitude per
+    unit coefficient at strength 1; prior (M,): the coefficient's expected square."""
+
+    res: int
+    channels: int
+    chips: np.ndarray
+    base: np.ndarray
+    coef: np.ndarray
+    scale: np.ndarray
+    prior: np.ndarray
+    pilot_amp: float
+    pilot_signs: np.ndarray
+
+    @property
+    def carriers(self) -> int:
+        return len(self.chips)
+
+
+def _pool_weights() -> np.ndarray:
+    n = formats.SNAPSHOT_SIZE
+    return np.concatenate([np.full(int(np.prod(bands.band_shape(b, n))), w) for b, w in PRINT_BANDS.items()])
+
+
+def _flat(coeffs: dict) -> np.ndarray:
+    return np.concatenate([coeffs[b].ravel() for b in PRINT_BANDS])
+
+
+def _unflat(vec: np.ndarray, coeffs: dict) -> dict:
+    out, i = dict(coeffs), 0
+    for b in PRINT_BANDS:
+        n = coeffs[b].size
+        out[b] = vec[i:i + n].reshape(coeffs[b].shape)
+        i += n
+    return out
+
+
+def _srgb_slope(s: np.ndarray) -> np.ndarray:
+    """d(sRGB)/d(linear) at sRGB value s in [0, 1]: how much a print's linear-light noise (halftone,
+    sensor) grows in sRGB, the space the snapshot is carried in (large in the darks)."""
+    s = np.clip(s, 0.0, 1.0)
+    dlin = np.where(s <= 0.04045, 1 / 12.92, 2.4 / 1.055 * ((s + 0.055) / 1.055) ** 1.4)
+    return 1.0 / dlin
+
+
+PRINT_NOISE = 3e-4
+"""the print's own noise power per coefficient (halftone, paper, sensor) per unit of `_srgb_slope` squared"""
+
+
+def band_noise(image: np.ndarray) -> dict[str, np.ndarray]:
+    """Noise power a carrier chip meets at every coefficient of each of `PRINT_BANDS` (band -> (h, w)),
+    estimated from an image (380, 380, 3) float sRGB in [0, 1] alone, so that the embedder (from the
+    snapshot) and the decoder (from the capture) agree: the print's noise (halftone, paper, sensor) is
+    even in linear light, so in sRGB it grows with the slope of the sRGB curve at the blurred grey there,
+    most in the darks (`PRINT_NOISE` times the slope squared, capped at 100 times). (Counting the host's
+    own texture as noise too was measured and lost: README "The print codec".)"""
+    grey = cv2.GaussianBlur(np.asarray(image, np.float32).mean(2), (0, 0), 2.0)
+    n = formats.SNAPSHOT_SIZE
+    e = n // 8 * 8   # level 3 covers the top-left e x e pixels
+    maps = {1: cv2.resize(grey, (n // 2, n // 2), interpolation=cv2.INTER_AREA),
+            2: cv2.resize(grey, (n // 4, n // 4), interpolation=cv2.INTER_AREA),
+            3: cv2.resize(grey[:e, :e], (n // 8, n // 8), interpolation=cv2.INTER_AREA)}
+    noise = {lvl: PRINT_NOISE * np.minimum(_srgb_slope(m.astype(np.float64)) ** 2, 100.0) for lvl, m in maps.items()}
+    return {b: noise[int(b[-3])] for b in PRINT_BANDS}
+
+
+def noise_map(image: np.ndarray) -> np.ndarray:
+    """`band_noise` flattened in the order of the carriers' pool (M,)."""
+    per = band_noise(image)
+    return np.concatenate([per[b].ravel() for b in PRINT_BANDS])
+
+
+@lru_cache(maxsize=8)
+def print_layout(res: int, channels: int) -> PrintLayout:
+    """The carriers of (3, channels, res, res) planes (deterministic: both sides build the same)."""
+    check_print_planes(channels, res)
+    n = formats.SNAPSHOT_SIZE
+    lam = np.tile(prior_spectrum(res).ravel(), 3 * channels)
+    total = PAYLOAD_RMS ** 2 * n * n * 3
+    power = allocate(lam, total * (1 - _PILOT_SHARE), DESIGN_NOISE)
+    active = np.flatnonzero(power > 1e-9 * total)
+    rng = np.random.default_rng(_SEED + 1000 * res + channels)
+    pool_w = _pool_weights()
+    count = PILOTS + len(active)
+    k = len(pool_w) // count
+    if k < 1:
+        raise ValueError(f"{count} carriers do not fit the snapshot's {len(pool_w)} coefficients")
+    chips = rng.permutation(len(pool_w))[:count * k].reshape(count, k)
+    w = rng.choice([-1.0, 1.0], size=chips.shape) * np.sqrt(pool_w[chips])
+    pilot_amp = float(np.sqrt(total * _PILOT_SHARE / PILOTS))
+    return PrintLayout(res, channels, chips, w, active, np.sqrt(power[active] / lam[active]), lam[active],
+                       pilot_amp, rng.choice([-1.0, 1.0], size=PILOTS))
+
+
+def random_planes(res: int, channels: int, rng: np.random.Generator) -> np.ndarray:
+    """(3, channels, res, res) float32 planes drawn from the prior spectrum (clipped to [-1, 1]): a
+    stand-in scene for training the restore network."""
+    lam = prior_spectrum(res)
+    coef = rng.normal(size=(3 * channels, res, res)) * np.sqrt(lam)
+    return np.clip(_idct(coef.ravel(), (3, channels, res, res)), -1, 1).astype(np.float32)
+
+
+def _dct(planes: np.ndarray) -> np.ndarray:
+    return np.stack([cv2.dct(p.astype(np.float64)) for p in planes.reshape(-1, *planes.shape[-2:])]).ravel()
+
+
+def _idct(coef: np.ndarray, shape) -> np.ndarray:
+    c = coef.reshape(-1, shape[-2], shape[-1])
+    return np.stack([cv2.idct(x) for x in c]).reshape(shape)
+
+
+def carrier_values(lay: PrintLayout, planes: np.ndarray, strength: float = 1.0) -> np.ndarray:
+    """planes (3, C, R, R) -> what each carrier must read (N,): pilots, then scaled DCT coefficients."""
+    vals = _dct(planes)[lay.coef] * lay.scale
+    return strength * np.concatenate([lay.pilot_amp * lay.pilot_signs, vals])
+
+
+def cancel_share(host: np.ndarray, lay: PrintLayout, host_psnr: float) -> float:
+    """How much of the host's own projection on the carriers to cancel, lambda in [0, 1]: cancelling costs
+    host fidelity (lambda^2 times the projections' energy), leaving it costs the reader (1 - lambda)^2
+    times it as interference; the share that gives the best reading SNR for this host at this fidelity,
+    against READ_NOISE. A smooth host is cancelled wholly, a busy one in part."""
+    w, q = _filters(lay, np.asarray(host, np.float64))
+    own = np.einsum("nk,nk->n", _flat(bands.analyse(host))[lay.chips], q)
+    inter = float(np.mean(own ** 2))                       # per carrier
+    budget = 10 ** (-host_psnr / 10) * host.size / lay.carriers
+    lam = np.linspace(0.0, 1.0, 41)
+    payload = budget - lam ** 2 * inter
+    snr = np.where(payload > 0, payload / (READ_NOISE + (1 - lam) ** 2 * inter), -1.0)
+    return float(lam[int(np.argmax(snr))])
+
+
+def embed(host: np.ndarray, planes: np.ndarray, host_psnr: float = HOST_PSNR, rounds: int = 4,
+          cancel: float | None = None, with_payload: bool = False):
+    """host (380, 380, 3) float RGB in [0, 1], planes (3, C, R, R) in [-1, 1] -> snapshot (380, 380, 3)
+    uint8 RGB at `host_psnr` dB from the host (the payload's power is scaled to it; the pilots tell the
+    decoder the scale) whose every carrier reads its value plus what is left of the host's own projection:
+    `cancel` of it is cancelled (None: `cancel_share` decides for this host), and clipping and rounding
+    are corrected by `rounds` projections. `with_payload`: also the payload pattern alone (380, 380, 3)
+    float32, the carriers times their values with no host (what the restore front-end learns to find)."""
+    n = formats.SNAPSHOT_SIZE
+    if host.shape != (n, n, 3):
+        raise ValueError(f"host must be ({n}, {n}, 3) RGB, got {host.shape}")
+    _, c, r, _ = planes.shape
+    lay = print_layout(r, c)
+    unit = carrier_values(lay, planes)
+    host = np.asarray(host, np.float64)
+    cancel = cancel_share(host, lay, host_psnr) if cancel is None else cancel
+    host8 = np.round(np.clip(host, 0, 1) * 255.0) / 255.0
+    want = 10 ** (-host_psnr / 10)
+    base = 0.0   # without cancelling, an empty payload costs nothing but rounding
+    if cancel > 0:
+        base = float(np.mean((_embed_scaled(lay, host, 0.0 * unit, rounds, cancel) / 255.0 - host8) ** 2))
+        if base >= want:
+            raise ValueError(f"cancelling the host alone costs more than {host_psnr} dB of host fidelity")
+    scale = np.sqrt(want / max(float(np.mean(unit ** 2)) * len(unit) / host8.size, 1e-12))   # energy is preserved
+    for _ in range(2):   # the payload's scale that lands on the host fidelity asked for: mse = base + s^2 P
+        snap = _embed_scaled(lay, host, unit * scale, rounds, cancel)
+        mse = float(np.mean((snap / 255.0 - host8) ** 2))
+        scale *= np.sqrt((want - base) / max(mse - base, 1e-12))
+    snap = _embed_scaled(lay, host, unit * scale, rounds, cancel)
+    if not with_payload:
+        return snap
+    w, _ = _filters(lay, snap / 255.0)
+    coeffs = {b: np.zeros_like(v) for b, v in bands.analyse(snap / 255.0).items()}
+    vec = _flat(coeffs)
+    vec[lay.chips] = w * (unit * scale)[:, None]
+    return snap, bands.synthesise(_unflat(vec, coeffs)).astype(np.float32)
+
+
+def _embed_scaled(lay: PrintLayout, host: np.ndarray, target: np.ndarray, rounds: int, cancel: float) -> np.ndarray:
+    img, own = host, None
+    for _ in range(rounds + 1):
+        w, q = _filters(lay, img)   # as the decoder will see them in this very image
+        coeffs = bands.analyse(img)
+        vec = _flat(coeffs)
+        read = np.einsum("nk,nk->n", vec[lay.chips], q)
+        own = read if own is None else own   # the host's own projection, measured once
+        vec[lay.chips] += w * (target + (1.0 - cancel) * own - read)[:, None]
+        img = np.round(np.clip(bands.synthesise(_unflat(vec, coeffs)), 0.0, 1.0) * 255.0) / 255.0
+    return (img * 255.0 + 0.5).astype(np.uint8)
+
+
+def _filters(lay: PrintLayout, img: np.ndarray):
+    """The carriers w (N, K) shaped by the brightness of `img`, the matched filters q (N, K) that read
+    them (weighted by 1 / noise, <q_i, w_i> = 1) and the chips' relative noise powers (N, K)."""
+    noise = noise_map(img)[lay.chips]
+    w = lay.base / np.sqrt(noise)
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    q = w / noise
+    q /= np.einsum("nk,nk->n", q, w)[:, None]
+    return w, q
+
+
+def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | None = None,
+             weighted: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """What each carrier reads in an image (380, 380, 3) (uint8, or float in [0, 1]): the readings (N,)
+    and each reading's relative noise power (N,). The carriers' shapes follow the brightness of
+    `capture` (default: the image itself; give the capture when `image` is the front-end's payload
+    estimate). `weighted`: a matched filter that also listens less where the print is noisier (the
+    darks), for a raw capture; else matched to the carriers only (the front-end has weighed the places)."""
+    img = image.astype(np.float64) / 255.0 if image.dtype == np.uint8 else np.asarray(image, np.float64)
+    cap = img if capture is None else (capture / 255.0 if capture.dtype == np.uint8 else capture)
+    lay = print_layout(res, channels)
+    w, q = _filters(lay, cap)
+    noise = noise_map(cap)[lay.chips]
+    if not weighted:
+        q, noise = w, np.ones_like(noise)
+    return np.einsum("nk,nk->n", _flat(bands.analyse(img))[lay.chips], q), np.einsum("nk,nk->n", q * q, noise)
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What the pilots say about one capture: the channel's gain and its noise power per carrier, and the
+    planes' expected RMS error that follows (no ground truth needed)."""
+
+    gain: float
+    noise: float
+    plane_rmse: float
+
+
+def restore(read: np.ndarray, factor: np.ndarray, res: int, channels: int,
+            strength: float = 1.0) -> tuple[np.ndarray, Reading]:
+    """Carrier readings (N,) and their relative noise powers (N,) (`despread`) -> planes (3, C, R, R)
+    float32 (the MMSE estimate, not clipped) and the pilots' `Reading` (gain; noise per carrier of average
+    noise factor)."""
+    lay = print_layout(res, channels)
+    pilots = read[:PILOTS] * lay.pilot_signs / strength
+    gain = max(float(np.mean(pilots)) / lay.pilot_amp, 1e-3)
+    unit = max(float(np.mean((pilots - gain * lay.pilot_amp) ** 2 / factor[:PILOTS])), 1e-14)
+    noise = unit * factor[PILOTS:] / strength ** 2   # per carrier, in units of strength 1
+    a = lay.scale * gain
+    coef = np.zeros(3 * channels * res * res)
+    coef[lay.coef] = a * lay.prior / (a * a * lay.prior + noise) * read[PILOTS:] / strength
+    err = lay.prior * noise / (a * a * lay.prior + noise)
+    missing = np.ones(coef.size, bool)
+    missing[lay.coef] = False
+    total_err = err.sum() + np.tile(prior_spectrum(res).ravel(), 3 * channels)[missing].sum()
+    rmse = float(np.sqrt(total_err / coef.size))
+    planes = _idct(coef, (3, channels, res, res)).astype(np.float32)
+    return planes, Reading(gain, float(unit * np.mean(factor)), rmse)

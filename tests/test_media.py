@@ -1,0 +1,121 @@
+"""The two media end to end: `embed --medium print|file` names its codec in the snapshot's metadata and
+in the sheet's QR code; `restore` and `decode` pick the codec from there and refuse an unknown one in one
+line; a print snapshot round-trips through its file, and a moderate photo of its print decodes."""
+import json
+from importlib import resources
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from helpers import assert_one_line_error, run_cli
+
+from snapshot3d import formats
+from snapshot3d.scanner.snapfile import read_snapshot
+from snapshot3d.scene import load_scene_file
+
+ASSETS = Path(str(resources.files("snapshot3d") / "assets"))
+SCENE = ASSETS / "spot-print.s3d"
+
+
+def _plane_psnr(a, b) -> float:
+    return float(10 * np.log10(4.0 / np.mean((a.planes() - b.planes()) ** 2)))
+
+
+@pytest.fixture(scope="module")
+def print_snapshot(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("print")
+    snap = tmp / "snap.png"
+    proc = run_cli("embed", str(SCENE), "--host", "builtin:chelsea", "-o", str(snap), "--report", str(tmp / "e.json"))
+    assert proc.returncode == 0, proc.stderr
+    return tmp, snap, json.loads((tmp / "e.json").read_text())
+
+
+def test_print_embed_names_its_codec_and_keeps_the_host(print_snapshot):
+    tmp, snap, rep = print_snapshot
+    assert rep["medium"] == "print" and rep["codec"] == formats.PRINT_CODEC
+    assert rep["host_psnr"] >= 31.9 and rep["embed_ms"] < 20_000   # designed encoder, numpy
+    rgb, meta = read_snapshot(snap)
+    assert meta.codec == formats.PRINT_CODEC and list(meta.planes) == [load_scene_file(SCENE).resolution,
+                                                                       load_scene_file(SCENE).channels]
+
+
+def test_print_snapshot_file_round_trip(print_snapshot):
+    tmp, snap, _ = print_snapshot
+    proc = run_cli("restore", str(snap), "-o", str(tmp / "back.s3d"), "--report", str(tmp / "r.json"))
+    assert proc.returncode == 0, proc.stderr
+    back, orig = load_scene_file(tmp / "back.s3d"), load_scene_file(SCENE)
+    assert back.codes.shape == orig.codes.shape
+    assert _plane_psnr(orig, back) >= 45.0   # 16x4 planes in chelsea: 53.0 dB measured
+    rep = json.loads((tmp / "r.json").read_text())
+    assert rep["codec"] == formats.PRINT_CODEC and rep["plane_rmse_expected"] > 0
+
+
+def test_sheet_qr_names_the_codec_and_a_moderate_photo_decodes(print_snapshot):
+    """sheet -> simulate moderate -> decode (torch blocked): the QR names print-1; views look like the scene."""
+    from test_decode import run_blocked
+
+    from snapshot3d.cameras import orbit_cameras
+    from snapshot3d.metrics import psnr
+    from snapshot3d.viewer.render import render_views
+    from snapshot3d.viewer.runtime import field_models
+
+    tmp, snap, _ = print_snapshot
+    assert run_cli("sheet", str(snap), "-o", str(tmp / "sheet.pdf")).returncode == 0
+    proc = run_cli("simulate", str(tmp / "sheet.pdf"), "-o", str(tmp / "photo.jpg"), "--severity", "moderate",
+                   "--seed", "3")
+    assert proc.returncode == 0, proc.stderr
+    proc = run_blocked("decode", str(tmp / "photo.jpg"), "-o", str(tmp / "out"), "--views", "4", "--size", "96")
+    assert proc.returncode == 0, proc.stderr
+    assert "quality estimate" in proc.stdout
+    rep = json.loads((tmp / "out" / "report.json").read_text())
+    assert rep["codec"] == formats.PRINT_CODEC and rep["medium"] == "print"
+    assert rep["scan"]["qr"]["codec"] == formats.PRINT_CODEC
+    orig = load_scene_file(SCENE)
+    c2w, intr = orbit_cameras(orig.orbit, 4, 96)
+    ref = render_views(field_models(), orig.planes(), orig.box, c2w, intr, 96, 96)
+    got = np.stack([cv2.cvtColor(cv2.imread(str(tmp / "out" / "views" / f"{i:03d}.png")), cv2.COLOR_BGR2RGB)
+                    for i in range(4)]) / 255.0
+    measured = psnr(got, ref)
+    assert measured >= MODERATE_MIN_DB
+    q = rep["quality_estimate"]
+    assert abs(q["restore_psnr_expected_db"] - measured) < 6.0   # a calibrated estimate, not a constant
+
+
+MODERATE_MIN_DB = 20.0
+
+
+def test_file_medium_still_names_hinet(tmp_path):
+    snap = tmp_path / "f.png"
+    proc = run_cli("embed", str(ASSETS / "spot.s3d"), "--medium", "file", "--refine", "0", "-o", str(snap))
+    assert proc.returncode == 0, proc.stderr
+    assert read_snapshot(snap)[1].codec == formats.FILE_CODEC
+    proc = run_cli("sheet", str(snap), "-o", str(tmp_path / "s.png"))
+    assert proc.returncode == 0 and "made for the file medium" in proc.stderr
+
+
+def test_unknown_codec_is_refused_in_one_line(print_snapshot, tmp_path):
+    from snapshot3d.scanner.qr import SheetMeta
+    from snapshot3d.scanner.sheet import render_sheet
+    from snapshot3d.scanner.snapfile import write_snapshot
+
+    _, snap, _ = print_snapshot
+    rgb, meta = read_snapshot(snap)
+    odd = SheetMeta(codec="print-9", box=meta.box, orbit=meta.orbit, planes=meta.planes)
+    write_snapshot(tmp_path / "odd.png", rgb, odd)
+    assert_one_line_error(run_cli("restore", str(tmp_path / "odd.png"), "-o", str(tmp_path / "x.s3d")),
+                          "unknown codec id 'print-9'")
+    sheet = render_sheet(rgb, odd, 2)
+    cv2.imwrite(str(tmp_path / "odd-photo.png"), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+    proc = run_cli("decode", str(tmp_path / "odd-photo.png"), "-o", str(tmp_path / "out"))
+    assert_one_line_error(proc, "unknown codec id 'print-9'")
+    assert not (tmp_path / "x.s3d").exists() and not (tmp_path / "out").exists()
+
+
+def test_embed_refuses_planes_a_medium_cannot_carry(tmp_path):
+    from snapshot3d.scene import Orbit, Scene, save_scene
+    big = Scene(codes=np.zeros((3, 4, 80, 80), np.uint8), box=np.array([[-1] * 3, [1] * 3]), orbit=Orbit(3.0))
+    save_scene(big, tmp_path / "big.s3d")
+    assert_one_line_error(run_cli("embed", str(tmp_path / "big.s3d"), "-o", str(tmp_path / "s.png")),
+                          "print codec carries planes")
+    assert not (tmp_path / "s.png").exists()

@@ -1,0 +1,115 @@
+"""The print medium's carriers (`snapshot3d.print_layout`, `snapshot3d.bands`): the band split is
+orthonormal, carriers are disjoint and unit-norm, an embedded snapshot reads back exactly, the host
+fidelity lands where it is asked, and the pilots' estimate of the error tracks the true error."""
+import numpy as np
+import pytest
+
+from snapshot3d import bands, formats, print_layout
+from snapshot3d.errors import UserError
+from snapshot3d.scanner.backgrounds import load_host
+
+N = formats.SNAPSHOT_SIZE
+
+
+def test_bands_are_orthonormal_and_invert(rng):
+    img = rng.random((N, N, 3))
+    b = bands.analyse(img)
+    assert set(b) == set(bands.ALL_BANDS)
+    assert np.abs(bands.synthesise(b) - img).max() < 1e-12
+    assert abs(sum(float((v ** 2).sum()) for v in b.values()) - float((img ** 2).sum())) < 1e-6 * img.size
+    assert b["Y3LH"].shape == (47, 47) and b["Y2HH"].shape == (95, 95) and b["Y1LH"].shape == (190, 190)
+    with pytest.raises(ValueError, match="multiples of 4"):
+        bands.analyse(np.zeros((10, 10, 3)))
+
+
+def test_allocation_spends_the_budget_where_it_pays():
+    lam = np.array([10.0, 1.0, 0.1, 1e-6])
+    p = print_layout.allocate(lam, total=2.0, noise=0.1)
+    assert abs(p.sum() - 2.0) < 1e-9 and p[0] > p[1] > p[2] and p[3] == 0.0
+
+
+@pytest.mark.parametrize("res,channels", [(32, 4), (16, 4), (64, 8)])
+def test_carriers_are_disjoint(res, channels):
+    lay = print_layout.print_layout(res, channels)
+    assert len(np.unique(lay.chips)) == lay.chips.size            # no coefficient serves two carriers
+    assert lay.carriers == print_layout.PILOTS + len(lay.coef) and lay.chips.shape[1] >= 1
+    assert len(lay.coef) <= 3 * channels * res * res
+
+
+def test_refuses_planes_it_cannot_carry():
+    with pytest.raises(ValueError, match="print codec carries planes"):
+        print_layout.check_print_planes(4, 80)
+    with pytest.raises(ValueError, match="print codec carries planes"):
+        print_layout.check_print_planes(13, 32)
+
+
+@pytest.fixture(scope="module")
+def embedded():
+    rng = np.random.default_rng(1)
+    planes = print_layout.random_planes(32, 4, rng)
+    host = load_host("builtin:chelsea")
+    return host, planes, print_layout.embed(host, planes, 32.0)
+
+
+def test_host_fidelity_lands_on_the_target(embedded):
+    host, planes, snap = embedded
+    host8 = np.round(host * 255) / 255
+    mse = np.mean((snap / 255.0 - host8) ** 2)
+    assert snap.dtype == np.uint8 and snap.shape == (N, N, 3)
+    assert abs(-10 * np.log10(mse) - 32.0) < 0.1
+
+
+def test_a_lossless_snapshot_reads_back_every_carrier(embedded):
+    """The carriers the encoder wrote are what a linear reading of the 8-bit file finds (up to rounding
+    and the host's own projection, which the designed encoder leaves and the pilots count as noise)."""
+    host, planes, snap = embedded
+    lay = print_layout.print_layout(32, 4)
+    target = print_layout.carrier_values(lay, planes)
+    read, factor = print_layout.despread(snap, 32, 4)
+    gain = np.mean(read[:print_layout.PILOTS] * lay.pilot_signs) / lay.pilot_amp
+    # the pilots carry the payload's scale: the readings are the target values times that scale, plus noise
+    assert gain > 0 and np.corrcoef(read, target)[0, 1] > 0.5
+    est, reading = print_layout.restore(read, factor, 32, 4)
+    true_rmse = float(np.sqrt(np.mean((est - planes) ** 2)))
+    assert true_rmse < 0.5 * planes.std()
+    assert 0.6 < reading.plane_rmse / true_rmse < 1.6   # the pilots predict the error without ground truth
+
+
+def test_pilots_see_added_noise(embedded):
+    """More channel noise: the pilots report more noise and a larger expected error, as the truth has it."""
+    host, planes, snap = embedded
+    rng = np.random.default_rng(3)
+    out = []
+    for sigma in (0.0, 8.0, 20.0):
+        noisy = np.clip(snap + rng.normal(0, sigma, snap.shape), 0, 255).astype(np.uint8)
+        est, reading = print_layout.restore(*print_layout.despread(noisy, 32, 4), 32, 4)
+        out.append((reading.noise, reading.plane_rmse, float(np.sqrt(np.mean((est - planes) ** 2)))))
+    assert out[0][0] < out[1][0] < out[2][0]
+    assert out[0][2] < out[1][2] < out[2][2]
+    for noise, expected, true in out:
+        assert 0.6 < expected / true < 1.6
+
+
+def test_print_front_end_trains_and_resumes(tmp_path):
+    """`train print-codec`'s loop on stand-in captures (a snapshot plus noise): it writes weights that load,
+    and a second run resumes from the checkpoint instead of starting again."""
+    from snapshot3d.train.codec.print_train import PrintCodecConfig, load_front_end, train_print_codec
+
+    rng = np.random.default_rng(0)
+    snaps = rng.integers(0, 256, (6, 380, 380, 3), dtype=np.uint8)
+    caps = np.clip(snaps + rng.normal(0, 8, snaps.shape), 0, 255).astype(np.uint8)
+    cfg = PrintCodecConfig(width=8, depth=1, steps=2, batch=2, crop=64, captures=6, checkpoint_every=1)
+    out, ck, logs = tmp_path / "front.npz", tmp_path / "front.npz.ckpt", []
+    s = train_print_codec(cfg, caps, snaps, out, checkpoint=ck, log=logs.append)
+    assert s["steps"] == 2 and s["held_out"]["held_out_loss"] > 0 and out.is_file() and ck.is_file()
+    net, back = load_front_end(out)
+    assert back == cfg
+    x = np.random.default_rng(1).uniform(0, 1, (1, 3, 64, 64)).astype(np.float32)
+    import torch
+    assert net(torch.from_numpy(x)).shape == (1, 3, 64, 64)
+    logs.clear()
+    from dataclasses import replace
+    s = train_print_codec(replace(cfg, steps=3), caps, snaps, out, checkpoint=ck, log=logs.append)
+    assert s["steps"] == 3 and "resumed at step 2" in logs
+    with pytest.raises(UserError, match="other settings"):
+        train_print_codec(replace(cfg, lr=0.5), caps, snaps, out, checkpoint=ck, log=logs.append)

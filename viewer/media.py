@@ -1,0 +1,66 @@
+"""Restoring planes from a (rectified) snapshot with the codec its metadata names, torch-free: the `file`
+medium's invertible network (one ONNX graph, then the least-squares unspread) or the `print` medium's
+designed carrier despreader (numpy, a linear receiver). An unknown codec id is refused in one line.
+
+Layouts: snapshot (380, 380, 3) uint8 RGB; planes (3, C, R, R) float32 in [-1, 1], rounded to the 8-bit
+values a scene carries."""
+from __future__ import annotations
+
+import numpy as np
+
+from snapshot3d import codec_layout, formats, print_layout
+from snapshot3d.errors import UserError
+from snapshot3d.scene import dequantize_planes, quantize_planes
+
+from .runtime import model_path, session
+
+__all__ = ["restore_planes", "restore_file", "restore_print", "onnx_runner"]
+
+
+def onnx_runner(kind: str):
+    """x (1, 3, 380, 380) float32 -> the model's only output, through onnxruntime (kind as `model_path`)."""
+    sess = session(str(model_path(kind)))
+    return lambda x: sess.run(None, {"snapshot": np.ascontiguousarray(x, np.float32)})[0]
+
+
+def _nchw(snapshot: np.ndarray) -> np.ndarray:
+    return (snapshot.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
+
+
+def restore_file(snapshot: np.ndarray, res: int, channels: int, strength: float = 1.0, run=None) -> np.ndarray:
+    """The file medium: planes from the invertible network's secret."""
+    secret = (run or onnx_runner("restore"))(_nchw(snapshot))[0] / strength
+    return codec_layout.secret_to_planes(secret, res, channels)
+
+
+def restore_print(snapshot: np.ndarray, res: int, channels: int, run=None) -> tuple[np.ndarray, print_layout.Reading]:
+    """The print medium: the capture read carrier by carrier (matched filters shaped and weighted by the
+    capture's brightness), MMSE with the gain and noise the pilots measure. Returns planes and the pilots'
+    `Reading` (an estimate of the planes' error, no ground truth needed). `run` (x (1, 3, 380, 380) ->
+    payload estimate, same layout) puts a learned front-end before the filters: the bench's `print-front`
+    row; the product reads the capture itself, which measured better (README, "The print medium")."""
+    if run is None:
+        return print_layout.restore(*print_layout.despread(snapshot, res, channels), res, channels)
+    restored = run(_nchw(snapshot))[0].transpose(1, 2, 0)
+    read, factor = print_layout.despread(restored, res, channels, capture=snapshot)
+    return print_layout.restore(read, factor, res, channels)
+
+
+def restore_planes(snapshot: np.ndarray, meta, runners: dict | None = None) -> tuple[np.ndarray, dict]:
+    """Planes (3, C, R, R) as carried (8-bit values) from a rectified snapshot and its metadata
+    (`scanner.qr.SheetMeta`), with the codec the metadata names; and what the codec says of its own
+    reading ({"plane_rmse_expected": ...} for the print codec, {} for the file codec). `runners` may
+    replace the ONNX graphs by kind (tests compare them with torch)."""
+    res, channels = meta.planes
+    runners = runners or {}
+    medium = formats.CODEC_MEDIUM.get(meta.codec)
+    if medium == "file":
+        planes, info = restore_file(snapshot, res, channels, meta.strength or 1.0, runners.get("restore")), {}
+    elif medium == "print":
+        planes, reading = restore_print(snapshot, res, channels, runners.get("restore-print"))
+        info = {"plane_rmse_expected": round(reading.plane_rmse, 4), "pilot_gain": round(reading.gain, 4),
+                "pilot_noise": float(f"{reading.noise:.4g}")}
+    else:
+        known = ", ".join(f"{c} ({m})" for c, m in formats.CODEC_MEDIUM.items())
+        raise UserError(f"unknown codec id {meta.codec!r}: this build decodes {known}")
+    return dequantize_planes(quantize_planes(planes)), info
