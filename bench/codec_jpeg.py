@@ -4,7 +4,9 @@ JPEG files at several qualities with 4:2:0 and 4:4:4 chroma, chroma subsampling 
 of about JPEG-95's size, blur, and sub-pixel shifts (the misregistration a scan leaves: about 0.4 px on
 `moderate` photos, `bench/results/channel.json`). With `--refine N`, the same for snapshots refined at
 embed time (`train.codec_refine`). `restore_psnr` of 20 orbit views at 128x128 (the fast renderer's views
-of the restored planes against those of the original planes). Writes codec_jpeg.{csv,json,png}."""
+of the restored planes against those of the original planes). Writes codec_jpeg.{csv,json,png}; and first
+(`--part sharing|all`) what sharing does to the whole file path, metadata included (`bench.sharing`,
+codec_sharing.{csv,json,png})."""
 from __future__ import annotations
 
 import json
@@ -75,6 +77,17 @@ DISTORTIONS = {
 
 
 def bench_codec_jpeg_command(args) -> int:
+    if args.part in ("sharing", "all"):
+        from .codec_print import heldout_hosts
+        from .sharing import bench_sharing
+
+        hosts = {h: load_host("builtin:" + h) for h in args.hosts.split(",") if h}
+        hosts.update({Path(p).stem: load_host(p) for p in heldout_hosts(args.heldout)})
+        scenes = [str(asset("spot.s3d")), *[p for p in args.scenes.split(",") if p and Path(p).is_file()]]
+        doc = bench_sharing(scenes, hosts, args.refine, SIZE, Path(args.out))
+        print(json.dumps(doc["summary"], indent=1))
+    if args.part == "sharing":
+        return 0
     scene = load_scene_file(asset("spot.s3d"))
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, SIZE)
     models = field_models()

@@ -13,7 +13,9 @@ Each row: `host_psnr`, `host_ssim`, `restore_psnr` (20 orbit views against the o
 pilots' `plane_rmse_expected` and the true plane RMS error. Sweeps on the first scene (`moderate`): the
 payload size (`--payloads`, scene files of other plane sizes) beside `bench capacity`'s bound, the host
 fidelity (`--strengths`), and the print size (`sheet --width-mm` 60, 100, 150, 200 at a 600 dpi printer).
-Writes codec_print.{csv,json,png} and codec_print_side_by_side.png (original, mild, moderate, severe)."""
+Writes codec_print.{csv,json,png} and codec_print_side_by_side.png (original, mild, moderate, severe).
+A run takes about an hour at full size; killed part-way, the same command resumes from the finished
+scene-host blocks (codec_print.partial.jsonl in the output folder)."""
 from __future__ import annotations
 
 import json
@@ -37,6 +39,7 @@ from snapshot3d.scene import load_scene_file
 from .common import (
     PHYSICAL,
     SEVERITIES,
+    RowBlocks,
     ViewJudge,
     capture_seeds,
     median,
@@ -121,10 +124,9 @@ def _front_end():
 
 
 def _snapshot(method: str, host: np.ndarray, scene, strength: float = 1.0) -> np.ndarray:
-    if method == "file":
-        from snapshot3d.train.codec.hinet import embed_planes, load_codec
-        return embed_planes(load_codec()[0], host, scene.planes(), strength)
-    return print_layout.embed(host, scene.planes(), print_layout.HOST_PSNR - 20 * np.log10(strength))
+    """The snapshot `embed` writes (metadata mark included; the file codec unrefined)."""
+    from snapshot3d.train.codec.commands import snapshot_for
+    return snapshot_for("file" if method == "file" else "print", host, scene, strength)
 
 
 def _rows(methods, scene, sname, hname, host, severities, seeds, judge, e2e, strength=1.0, dots=None, group="main"):
@@ -215,12 +217,15 @@ def bench_codec_print_command(args) -> int:
     hosts = {h: load_host("builtin:" + h) for h in args.hosts.split(",") if h}
     hosts.update({Path(p).stem: load_host(p) for p in heldout_hosts(args.heldout)})
     methods = [m for m in args.methods.split(",") if m]
+    blocks = RowBlocks(out / "codec_print.partial.jsonl",
+                       {k: v for k, v in vars(args).items() if isinstance(v, (str, int, float, bool))})
     rows, judges = [], {}
     for sname, scene in scenes.items():
         judges[sname] = judge = ViewJudge(scene, args.size)
         e2e = E2E(scene)
         for hname, host in hosts.items():
-            rows += _rows(methods, scene, sname, hname, host, SEVERITIES, args.seeds, judge, e2e)
+            rows += blocks.rows(f"main/{sname}/{hname}", lambda: _rows(
+                methods, scene, sname, hname, host, SEVERITIES, args.seeds, judge, e2e))
             print(f"{sname} / {hname}: {len(rows)} rows ({time.time() - t0:.0f} s)", flush=True)
     first = next(iter(scenes))
     scene, judge = scenes[first], judges[first]
@@ -231,13 +236,16 @@ def bench_codec_print_command(args) -> int:
         s = load_scene_file(p)
         j = ViewJudge(s, args.size)
         for hn, h in sweep_hosts:
-            rows += _rows(["print"], s, Path(p).stem, hn, h, ["moderate"], sweep_seeds, j, None, group="payload")
+            rows += blocks.rows(f"payload/{Path(p).stem}/{hn}", lambda: _rows(
+                ["print"], s, Path(p).stem, hn, h, ["moderate"], sweep_seeds, j, None, group="payload"))
     for strength in (float(v) for v in args.strengths.split(",") if v):
-        rows += _rows(["print"], scene, first, hname, host, ["moderate"], sweep_seeds, judge, None, strength,
-                      group="strength")
+        rows += blocks.rows(f"strength/{strength}", lambda: _rows(
+            ["print"], scene, first, hname, host, ["moderate"], sweep_seeds, judge, None, strength, group="strength"))
     for mm in PRINT_SIZES_MM:
-        rows += _rows(["print"], scene, first, hname, host, ["moderate"], sweep_seeds, judge, None, dots=print_dots(mm),
-                      group=f"print-{mm}mm")
+        rows += blocks.rows(f"print/{mm}", lambda: _rows(
+            ["print"], scene, first, hname, host, ["moderate"], sweep_seeds, judge, None, dots=print_dots(mm),
+            group=f"print-{mm}mm"))
+    print(f"all rows ({time.time() - t0:.0f} s)", flush=True)
     side_by_side(scene, host, judge, out / "codec_print_side_by_side.png")
     kb = _capacity_kb()
     payload = {}
@@ -263,6 +271,7 @@ def bench_codec_print_command(args) -> int:
         "strength": summarise(rows, "strength"), "print_size": {f"{mm} mm": summarise(rows, f"print-{mm}mm")
                                                                for mm in PRINT_SIZES_MM}})
     write_chart(rows, doc, out / "codec_print.png")
+    blocks.finish()
     for method, sevs in summary.items():
         print(method, {s: (round(v["host_psnr"] or 0, 1), round(v["restore_psnr"] or 0, 1)) for s, v in sevs.items()})
     return 0

@@ -19,7 +19,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr as _psnr
 
 __all__ = ["SEVERITIES", "PHYSICAL", "write_report", "write_rows", "psnr", "median", "capture_seeds",
-           "through_channel", "ViewJudge", "pyplot", "bench_progress", "update_budget_curve"]
+           "through_channel", "ViewJudge", "pyplot", "bench_progress", "update_budget_curve", "RowBlocks"]
 
 SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")
 PHYSICAL = ("mild", "moderate", "severe")
@@ -43,6 +43,38 @@ def write_report(out: Path, stem: str, rows: list[dict], doc: dict) -> dict:
     doc = {"command": "snapshot3d " + " ".join(sys.argv[1:]), "cores": os.cpu_count(), **doc}
     (out / f"{stem}.json").write_text(json.dumps(doc, indent=2) + "\n")
     return doc
+
+
+class RowBlocks:
+    """A long benchmark's rows, computed in named blocks and appended to `path` (JSON lines, the first line
+    the run's `signature`) as each block ends, so that a run killed part-way resumes where it stopped: a
+    rerun with the same signature reuses the finished blocks. `finish()` removes the file."""
+
+    def __init__(self, path: Path, signature: dict):
+        self.path, self.done = Path(path), {}
+        head = json.dumps(signature, sort_keys=True, default=str)
+        lines = self.path.read_text().splitlines() if self.path.is_file() else []
+        if lines and lines[0] == head:
+            for line in lines[1:]:
+                try:
+                    rec = json.loads(line)
+                except ValueError:
+                    break  # the line the kill cut
+                self.done[rec["key"]] = rec["rows"]
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.path.write_text(head + "\n" + "".join(json.dumps({"key": k, "rows": r}, default=float) + "\n"
+                                                   for k, r in self.done.items()))
+
+    def rows(self, key: str, compute) -> list[dict]:
+        """The block `key`'s rows: from an earlier run when it finished there, else `compute()` (saved)."""
+        if key not in self.done:
+            self.done[key] = json.loads(json.dumps(compute(), default=float))
+            with open(self.path, "a") as f:
+                f.write(json.dumps({"key": key, "rows": self.done[key]}) + "\n")
+        return self.done[key]
+
+    def finish(self) -> None:
+        self.path.unlink(missing_ok=True)
 
 
 def psnr(a, b) -> float:

@@ -234,10 +234,11 @@ def refuse_snapshot_file(path, img: np.ndarray) -> None:
                         f"-o sheet.pdf' and photograph the print")
 
 
-def scan_file(path) -> ScanResult:
-    """Read (safely, `imageio_safe`) and scan a photo file; timings include decoding ("decode")."""
+def scan_file(path, img: np.ndarray | None = None) -> ScanResult:
+    """Read (safely, `imageio_safe`) and scan a photo file (`img`: its (H, W, 3) uint8 BGR when already
+    read); timings include decoding ("decode")."""
     t0 = time.perf_counter()
-    img = read_image_bgr(path)
+    img = read_image_bgr(path) if img is None else img
     refuse_snapshot_file(path, img)
     dec = (time.perf_counter() - t0) * 1e3
     res = scan_image(img)

@@ -1,7 +1,9 @@
-"""Snapshot files: the 380x380 image plus the metadata text decoding needs (the QR payload, see `qr`),
-kept in a PNG text chunk or a JPEG comment so that a snapshot file restores on its own.
+"""Snapshot files: the 380x380 image plus the metadata decoding needs (the QR payload, see `qr`), kept twice:
+as text (a PNG text chunk or a JPEG comment, the fast path) and as a mark in the pixels (`pixelmeta`,
+written by `embed`), so that a shared copy whose text was stripped, re-encoded or resized still restores.
+When both are there they must agree.
 
-Images: (380, 380, 3) uint8 RGB."""
+Images: (380, 380, 3) uint8 RGB (a copy read back may be another size; `snapshot_in_image` realigns it)."""
 from __future__ import annotations
 
 import io
@@ -15,9 +17,11 @@ from snapshot3d import formats
 from snapshot3d.errors import UserError
 
 from .imageio_safe import read_image_bgr, write_atomic
+from .pixelmeta import MAX_SHIFT, find_meta
 from .qr import SheetMeta, decode_payload, encode_payload
 
-__all__ = ["META_KEY", "encode_snapshot", "write_snapshot", "read_snapshot"]
+__all__ = ["META_KEY", "encode_snapshot", "write_snapshot", "read_snapshot", "snapshot_in_image", "metas_agree",
+           "metadata_text"]
 
 META_KEY = "snapshot3d"
 """name of the PNG text chunk holding the payload"""
@@ -45,7 +49,8 @@ def write_snapshot(path, rgb: np.ndarray, meta: SheetMeta, jpeg_quality: int = 9
     write_atomic(path, encode_snapshot(rgb, meta, Path(path).suffix, jpeg_quality))
 
 
-def _payload(path: Path) -> str | None:
+def metadata_text(path) -> str | None:
+    """The snapshot3d metadata text a file carries (PNG text chunk or JPEG comment), or None."""
     try:
         with Image.open(path) as im:
             text = im.info.get(META_KEY) or im.info.get("comment")
@@ -56,21 +61,58 @@ def _payload(path: Path) -> str | None:
     return text or None
 
 
-def read_snapshot(path, meta_text: str | None = None) -> tuple[np.ndarray, SheetMeta]:
-    """(380, 380, 3) uint8 RGB and its metadata; `meta_text` (a QR payload) overrides the file's."""
-    path = Path(path)
-    rgb = cv2.cvtColor(read_image_bgr(path), cv2.COLOR_BGR2RGB)
+def metas_agree(a: SheetMeta, b: SheetMeta) -> bool:
+    """The same metadata up to the text's four significant digits."""
+    def close(x, y):
+        return (x is None) == (y is None) and (x is None or np.allclose(x, y, rtol=1e-3, atol=1e-4))
+    return (a.version, a.codec, a.planes) == (b.version, b.codec, b.planes) and all(
+        close(getattr(a, k), getattr(b, k)) for k in ("box", "orbit", "target", "strength"))
+
+
+def _maybe_snapshot(h: int, w: int) -> bool:
+    """A snapshot copy is square (resized or not) or within MAX_SHIFT pixels of the snapshot's size."""
     n = formats.SNAPSHOT_SIZE
-    if rgb.shape[:2] != (n, n):
-        raise UserError(f"{path.name} is {rgb.shape[1]}x{rgb.shape[0]}; a snapshot is {n}x{n} "
-                        f"(for a photo of a printed sheet use 'snapshot3d decode')")
-    text = meta_text or _payload(path)
+    return (abs(h - n) <= MAX_SHIFT and abs(w - n) <= MAX_SHIFT) or (abs(h - w) <= 0.02 * max(h, w) and h <= 8192)
+
+
+def snapshot_in_image(name: str, rgb: np.ndarray, text: str | None, trust_text: bool = False
+                      ) -> tuple[np.ndarray, SheetMeta, str] | None:
+    """(snapshot (380, 380, 3) uint8 RGB, metadata, where the metadata came from: "text" or "pixels") of an
+    image file's (H, W, 3) uint8 RGB and its metadata text (None when it has none); None when the image is
+    no snapshot (no text, no readable mark). With `trust_text` (a QR text the user passed) the mark is not
+    consulted for the metadata, only for the alignment of a resized or cropped copy."""
+    n = formats.SNAPSHOT_SIZE
+    found = find_meta(rgb) if _maybe_snapshot(*rgb.shape[:2]) else None
+    if text is None and found is None:
+        return None
     if text is None:
-        raise UserError(f"{path.name} carries no snapshot3d metadata; pass the sheet's QR text with --meta")
+        return found[1], found[0], "pixels"
     try:
         meta = decode_payload(text)
     except ValueError as e:
-        raise UserError(f"{path.name}: {e}") from None
+        raise UserError(f"{name}: {e}") from None
+    if found is not None and not trust_text and not metas_agree(meta, found[0]):
+        raise UserError(f"{name}: its metadata text and the mark in its pixels disagree (an edited or "
+                        f"mislabelled file); pass the sheet's QR text with --meta to choose")
+    if found is not None:
+        return found[1], meta, "text"
+    if rgb.shape[:2] != (n, n):
+        raise UserError(f"{name} is {rgb.shape[1]}x{rgb.shape[0]} and no snapshot mark reads in its pixels; a "
+                        f"snapshot is {n}x{n} (for a photo of a printed sheet use 'snapshot3d decode')")
+    return rgb, meta, "text"
+
+
+def read_snapshot(path, meta_text: str | None = None) -> tuple[np.ndarray, SheetMeta]:
+    """(380, 380, 3) uint8 RGB and its metadata, from the file's text or the mark in its pixels (a copy that
+    was re-encoded, resized or cropped is realigned); `meta_text` (a QR payload) overrides both."""
+    path = Path(path)
+    rgb = cv2.cvtColor(read_image_bgr(path), cv2.COLOR_BGR2RGB)
+    got = snapshot_in_image(path.name, rgb, meta_text or metadata_text(path), trust_text=meta_text is not None)
+    if got is None:
+        size = "" if rgb.shape[:2] == (formats.SNAPSHOT_SIZE,) * 2 else f" ({rgb.shape[1]}x{rgb.shape[0]})"
+        raise UserError(f"{path.name}{size} carries no snapshot3d metadata: no text chunk, and no mark readable in its "
+                        f"pixels (not a snapshot, or damaged past reading); pass the sheet's QR text with --meta")
+    rgb, meta, _ = got
     if meta.planes is None or meta.box is None:
         raise UserError(f"{path.name}: its metadata lacks the plane size or the scene box")
     return rgb, meta

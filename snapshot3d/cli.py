@@ -117,14 +117,17 @@ def _codec_parsers(sub) -> None:
 
     rs = _add(sub, "restore", "recover the scene from a snapshot file, with the codec its metadata names (no torch)",
               _run("snapshot3d.viewer.commands", "restore_command"))
-    rs.add_argument("snapshot", help="snapshot file (380x380 .png or .jpg with snapshot3d metadata)")
+    rs.add_argument("snapshot", help="snapshot file (.png or .jpg); its metadata comes from its text or from the "
+                                     "mark in its pixels, so a shared copy (re-encoded, resized, cropped) restores")
     rs.add_argument("-o", "--output", required=True, help="scene file to write (.s3d)")
-    rs.add_argument("--meta", help="the sheet's QR text, when the file carries no metadata")
+    rs.add_argument("--meta", help="the sheet's QR text, when neither the file's text nor its pixels carry the "
+                                   "metadata")
     rs.add_argument("--report", help="write a JSON report here")
 
-    dc = _add(sub, "decode", "photo of a printed sheet -> views, turntable, report (no torch)",
+    dc = _add(sub, "decode", "photo of a printed sheet (or a snapshot file) -> views, turntable, report (no torch)",
               _run("snapshot3d.viewer.commands", "decode_command"))
-    dc.add_argument("photo", help="photo (.jpg or .png) of a printed snapshot3d sheet")
+    dc.add_argument("photo", help="photo (.jpg or .png) of a printed snapshot3d sheet, or a snapshot file (also a "
+                                  "shared copy with its text stripped)")
     dc.add_argument("-o", "--output", required=True, help="output folder")
     dc.add_argument("--views", type=int, default=20, help="orbit views")
     dc.add_argument("--size", type=int, default=380, help="view size in pixels")

@@ -87,14 +87,23 @@ def add_bench_commands(bsub, add) -> None:
     _quick(bc, scenes=None, hosts="coffee", seeds=1, size=48, refine=5, strengths="1", heldout=0,
            payloads="bench/models/spot-r32c4.s3d")
 
-    bj = add(bsub, "codec-jpeg", "restore_psnr of a snapshot file through JPEG (4:2:0, 4:4:4), chroma "
+    bj = add(bsub, "codec-jpeg", "a snapshot file shared: metadata from the pixels and restore_psnr through JPEG, "
+                                 "resizing and crops; and the codec alone through JPEG (4:2:0, 4:4:4), chroma "
                                  "subsampling, noise, blur and sub-pixel shifts, one at a time",
              _run("snapshot3d.bench.codec_jpeg", "bench_codec_jpeg_command"))
     _out(bj)
     bj.add_argument("--compare", default=None, help="another codec weights file measured beside the shipped one")
     bj.add_argument("--refine", type=int, default=100, help="also the shipped codec's snapshots refined this many "
-                                                           "steps at embed time (0: not)")
-    _quick(bj, refine=5)
+                                                           "steps at embed time (0: not); the sharing part's snapshots "
+                                                           "are refined this many steps")
+    bj.add_argument("--part", default="all", choices=("all", "sharing", "distortions"),
+                    help="sharing: shared copies of a file snapshot end to end (metadata from the pixels, JPEG, "
+                         "resizing, crops; codec_sharing.*); distortions: the codec alone (codec_jpeg.*)")
+    bj.add_argument("--hosts", default="coffee,chelsea", help="sharing part: bundled host photos")
+    bj.add_argument("--heldout", type=int, default=2, help="sharing part: photos of ../shared/data/hosts/heldout too")
+    bj.add_argument("--scenes", default="bench/models/lego-print.s3d",
+                    help="sharing part: scene files beside the bundled spot (comma-separated)")
+    _quick(bj, refine=5, hosts="coffee", heldout=0, scenes="")
 
     bq = add(bsub, "capacity", "the capture channel's Gaussian capacity per severity and the best restore_psnr "
                                "it allows, beside the shipped codec's, per plane size",

@@ -62,7 +62,8 @@ def test_embed_refuses_planes_the_codec_cannot_carry(tmp_path):
 def test_restore_bad_inputs(tmp_path):
     small = tmp_path / "small.png"
     cv2.imwrite(str(small), np.zeros((100, 120, 3), np.uint8))
-    assert_one_line_error(run("restore", str(small), "-o", str(tmp_path / "x.s3d")), "a snapshot is 380x380")
+    assert_one_line_error(run("restore", str(small), "-o", str(tmp_path / "x.s3d")),
+                          "small.png (120x100) carries no snapshot3d metadata")
     bare = tmp_path / "bare.png"
     cv2.imwrite(str(bare), np.zeros((380, 380, 3), np.uint8))
     assert_one_line_error(run("restore", str(bare), "-o", str(tmp_path / "x.s3d")), "no snapshot3d metadata")

@@ -8,7 +8,7 @@ from helpers import run_cli
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 # appended to each command of the README's pipeline: speed only, nothing that changes what runs
-SMALL = {"fit": ["--steps", "60", "--size", "64", "--occ-warmup", "20"], "embed": ["--refine", "2"],
+SMALL = {"fit": ["--steps", "30", "--size", "64", "--occ-warmup", "10"], "embed": ["--refine", "2"],
          "decode": ["--views", "3", "--size", "64"]}
 
 

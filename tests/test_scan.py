@@ -254,16 +254,18 @@ def test_one_misplaced_marker_is_dropped(sheet, snapshot):
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) >= 40.0
 
 
-def test_snapshot_file_given_to_scan_or_decode_says_what_to_do(tmp_path):
+def test_snapshot_sized_file_given_to_scan_or_decode_says_what_to_do(tmp_path):
+    """`scan` reads photos only; `decode` takes snapshot files too, but not a bare 380x380 image."""
     from helpers import assert_one_line_error, run_cli
 
     snap = tmp_path / "snap.png"
     cv2.imwrite(str(snap), np.full((formats.SNAPSHOT_SIZE, formats.SNAPSHOT_SIZE, 3), 128, np.uint8))
-    for cmd in ("scan", "decode"):
-        out = tmp_path / ("o.png" if cmd == "scan" else "out")
-        proc = run_cli(cmd, str(snap), "-o", str(out))
-        assert_one_line_error(proc, "is a 380x380 snapshot file, not a photo of a printed sheet")
-        assert "snapshot3d restore snap.png" in proc.stderr and not out.exists()
+    proc = run_cli("scan", str(snap), "-o", str(tmp_path / "o.png"))
+    assert_one_line_error(proc, "is a 380x380 snapshot file, not a photo of a printed sheet")
+    assert "snapshot3d restore snap.png" in proc.stderr and not (tmp_path / "o.png").exists()
+    proc = run_cli("decode", str(snap), "-o", str(tmp_path / "out"))
+    assert_one_line_error(proc, "is 380x380 like a snapshot file but carries no snapshot3d metadata")
+    assert not (tmp_path / "out").exists()
 
 
 def test_simulate_reads_the_pdf_through_the_png_beside_it(tmp_path):

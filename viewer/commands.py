@@ -46,7 +46,8 @@ def _quality_lines(q: dict) -> list[str]:
     """What decode says about the views' expected quality (one or two lines)."""
     expected = q.get("restore_psnr_expected_db")
     if expected is None:
-        return [f"quality estimate: none (no calibration shipped); markers pilot_psnr {q['pilot_psnr_db']:.1f} dB"]
+        why = "no calibration shipped" if q.get("pilot_psnr_db") is not None else "a snapshot file has no markers"
+        return [f"quality estimate: none ({why})"]
     lines = [f"quality estimate: restore_psnr about {expected:.1f} dB (from {q['basis']}, "
              f"typical error {q['calibration']['held_out_rmse_db']:.1f} dB)"]
     if expected < POOR_DB:

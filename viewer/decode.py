@@ -1,4 +1,5 @@
-"""Photo -> turnable scene, without torch: scan (OpenCV) -> restore (ONNX) -> render (numpy + ONNX).
+"""Photo -> turnable scene, without torch: scan (OpenCV) -> restore (ONNX) -> render (numpy + ONNX). A
+snapshot file (or a copy of one that sharing re-encoded, resized or stripped of its text) skips the scan.
 
 `decode_photo` returns the views (N, size, size, 3) float32 RGB in [0, 1], the restored scene and a
 report with `detected`, `confidence`, `timings_ms` per stage, `decode_ms` (photo file to all views in
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -45,27 +47,53 @@ def scene_from_meta(codes: np.ndarray, meta) -> Scene:
 
 
 def _meta(qr: dict | None):
-    from snapshot3d.scanner.qr import SheetMeta, check_codec
+    from snapshot3d.scanner.qr import SheetMeta
 
     if qr is None:
         raise UserError("found the sheet but could not read its QR code (it holds the scene box and plane size); "
                         "retake the photo closer and sharper")
-    meta = SheetMeta(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in qr.items()})
+    return _checked(SheetMeta(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in qr.items()}))
+
+
+def _checked(meta):
+    from snapshot3d.scanner.qr import check_codec
+
     check_codec(meta)
     if meta.planes is None or meta.box is None:
-        raise UserError("the sheet's QR code lacks the plane size or the scene box (a sheet made without a scene)")
+        raise UserError("the snapshot's metadata lacks the plane size or the scene box (a sheet made without a "
+                        "scene)")
     return meta
+
+
+def _read(path):
+    """(scan result or None, snapshot (380, 380, 3) uint8 RGB, metadata, what the file was) of a photo of a
+    sheet, or of a snapshot file (its text metadata or the mark in its pixels; a copy re-encoded, resized or
+    cropped by sharing is realigned)."""
+    import cv2
+
+    from snapshot3d.scanner.imageio_safe import read_image_bgr
+    from snapshot3d.scanner.scan import scan_file
+    from snapshot3d.scanner.snapfile import metadata_text, snapshot_in_image
+
+    img = read_image_bgr(path)
+    got = snapshot_in_image(Path(path).name, cv2.cvtColor(img, cv2.COLOR_BGR2RGB), metadata_text(path))
+    if got is not None:
+        snapshot, meta, where = got
+        return None, snapshot, _checked(meta), f"snapshot file (metadata from its {where})"
+    n = formats.SNAPSHOT_SIZE
+    if img.shape[:2] == (n, n):
+        raise UserError(f"{Path(path).name} is {n}x{n} like a snapshot file but carries no snapshot3d metadata (no "
+                        f"text chunk, no mark readable in its pixels): not a snapshot, or damaged past reading")
+    res = scan_file(path, img)
+    return res, res.snapshot, _meta(res.qr), "photo of a sheet"
 
 
 def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORBIT_SIZE,
                  cfg: RenderConfig = RenderConfig(), on_view=None) -> Decoded:
-    from snapshot3d.scanner.scan import scan_file
-
     t0 = time.perf_counter()
-    res = scan_file(path)
-    meta = _meta(res.qr)
+    res, snapshot, meta, source = _read(path)
     t1 = time.perf_counter()
-    planes, codec_info = restore_planes(res.snapshot, meta)
+    planes, codec_info = restore_planes(snapshot, meta)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
     models = field_models()
@@ -82,15 +110,18 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
     out = render_views(models, planes, scene.box, c2w, intr, size, size, cfg, baked=baked, on_view=_tick)
     t4 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
+    pilot = None if res is None else res.pilot_psnr
     report = {
-        "detected": True, "confidence": round(float(res.confidence), 3),
+        "source": source,
+        "detected": True, "confidence": None if res is None else round(float(res.confidence), 3),
         "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3), "render": ms(t3, t4),
                        "first_view": ms(t0, first[0]) if first else None},
         "decode_ms": ms(t0, t4),
         "codec": meta.codec, "medium": formats.CODEC_MEDIUM[meta.codec],
-        "quality_estimate": quality_estimate(meta.codec, res.pilot_psnr, codec_info.get("plane_rmse_expected")),
+        "quality_estimate": quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected")),
         "planes": list(meta.planes), "views": views, "size": size, "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
-        "scan": {k: v for k, v in res.report().items() if k in ("corners", "reprojection_px", "qr")},
+        "scan": None if res is None else {k: v for k, v in res.report().items()
+                                          if k in ("corners", "reprojection_px", "qr")},
     }
     return Decoded(out, scene, report, baked)

@@ -28,20 +28,23 @@ def load_calibration(codec: str) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
-def predictor_value(codec: str, pilot_psnr: float, plane_rmse: float | None) -> float | None:
+def predictor_value(codec: str, pilot_psnr: float | None, plane_rmse: float | None) -> float | None:
     """The number a codec's calibration line reads: log10 of the expected plane RMS error (print), or the
-    markers' pilot_psnr in dB (file)."""
+    markers' pilot_psnr in dB (file; None for a snapshot file, which has no markers)."""
     if formats.CODEC_MEDIUM.get(codec) == "print":
         return math.log10(max(plane_rmse, 1e-6)) if plane_rmse is not None else None
-    return float(pilot_psnr)
+    return None if pilot_psnr is None else float(pilot_psnr)
 
 
-def quality_estimate(codec: str, pilot_psnr: float, plane_rmse: float | None = None) -> dict:
+def quality_estimate(codec: str, pilot_psnr: float | None, plane_rmse: float | None = None) -> dict:
+    """The expected restore_psnr of a decode; `pilot_psnr` is the markers' (None for a snapshot file)."""
     cal = load_calibration(codec)
     x = predictor_value(codec, pilot_psnr, plane_rmse)
     print_codec = formats.CODEC_MEDIUM.get(codec) == "print"
-    out = {"pilot_psnr_db": round(float(pilot_psnr), 2), "plane_rmse_expected": plane_rmse,
-           "basis": "the codec's pilot carriers" if print_codec else "the sheet's markers",
+    out = {"pilot_psnr_db": None if pilot_psnr is None else round(float(pilot_psnr), 2),
+           "plane_rmse_expected": plane_rmse,
+           "basis": "the codec's pilot carriers" if print_codec else
+                    "the sheet's markers" if pilot_psnr is not None else "none: a snapshot file has no markers",
            "restore_psnr_expected_db": None, "calibration": None}
     if cal is not None and x is not None:
         lo, hi = cal.get("range") or cal["pilot_range"]

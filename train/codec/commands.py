@@ -15,6 +15,7 @@ from snapshot3d.metrics import psnr, ssim
 from snapshot3d.options import config_from_args
 from snapshot3d.reports import write_json
 from snapshot3d.scanner.backgrounds import load_host
+from snapshot3d.scanner.pixelmeta import mark
 from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import Scene, load_scene_file
 
@@ -32,11 +33,15 @@ def check_planes_for(medium: str, scene: Scene) -> None:
 
 def snapshot_for(medium: str, host: np.ndarray, scene: Scene, strength: float = 1.0, refine: int = 0,
                  show_progress: bool = False) -> np.ndarray:
-    """The snapshot (380, 380, 3) uint8 RGB of `scene` in `host` for a medium: `print` (the designed carriers,
-    at the print host fidelity less 20 log10(strength) dB) or `file` (the invertible network, refined
-    `refine` steps)."""
+    """The snapshot (380, 380, 3) uint8 RGB of `scene` in `host` ((380, 380, 3) float RGB in [0, 1]) for a
+    medium: `print` (the designed carriers, at the print host fidelity less 20 log10(strength) dB) or `file`
+    (the invertible network, refined `refine` steps). A `file` snapshot's host is first marked with its
+    metadata (`scanner.pixelmeta`), so that a shared copy stripped of its text still restores; a `print`
+    snapshot's metadata travels in the sheet's QR code (and the file's text)."""
     if medium == "print":
         return print_layout.embed(host, scene.planes(), print_layout.HOST_PSNR - 20 * np.log10(strength))
+    meta = scene_meta(scene, formats.MEDIUM_CODEC[medium], strength)
+    host = mark(np.clip(np.asarray(host) * 255 + 0.5, 0, 255).astype(np.uint8), meta).astype(np.float32) / 255.0
     from .hinet import load_codec
     from .refine import snapshot_of
     return snapshot_of(load_codec()[0], host, scene.planes(), refine, strength, show_progress=show_progress)

@@ -8,7 +8,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from snapshot3d import formats
 from snapshot3d.cameras import orbit_cameras as _orbit_cameras
@@ -20,7 +19,6 @@ from snapshot3d.reports import write_json
 from snapshot3d.scene import Orbit, Scene, load_scene_file, save_scene
 
 from .config import FitConfig, check_fit_config
-from .decoder import load_decoder
 
 __all__ = ["fit_scene", "fit_command", "render_command", "mesh_command", "train_decoder_command", "orbit_cameras",
            "render_scene"]
@@ -53,18 +51,23 @@ def _default_orbit(posed) -> Orbit:
 
 def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int = 1, checkpoint=None,
               size: int = 200, quiet: bool = False, device=None, medium: str | None = None):
-    """Load, fit (on `device`, None: the CPU) and evaluate. Returns (Scene, report dict, held-out renders)."""
+    """Load, fit (on `device`: a torch.device, a --device name, or None: the CPU) and evaluate. Returns
+    (Scene, report dict, held-out renders). The capture is loaded before torch is imported, so that a
+    wrong path fails at once."""
     from snapshot3d.loaders import load_scene
     from snapshot3d.scene import dequantize_planes
-
-    from .budget import fit_ladder
-    from .evaluate import evaluate_planes
-    from .fit import fit
 
     posed = load_scene(spec, downscale=downscale, size=size) if spec.startswith("builtin:") else \
         load_scene(spec, downscale=downscale)
     if posed.skipped and not quiet:
         print(f"{posed.name}: {posed.skipped} listed frames have no image and were skipped")
+    from ..device import resolve_device
+    from .budget import fit_ladder
+    from .decoder import load_decoder
+    from .evaluate import evaluate_planes
+    from .fit import fit
+
+    device = resolve_device(device) if isinstance(device, str) else device
     decoder = load_decoder().to(device or "cpu")
     t0 = time.perf_counter()
     log = (lambda *_: None) if quiet else print
@@ -107,13 +110,11 @@ def fit_command(args) -> int:
     ckpt = out.with_name(out.name + ".ckpt") if args.budget == "fixed" else None
     if ckpt is not None and ckpt.exists() and not args.resume:
         ckpt.unlink()
-    from ..device import resolve_device
-
     if args.medium and args.budget != "auto":
         raise UserError("--medium chooses the plane size with --budget auto; with --budget fixed give --plane-res "
                         "and --plane-channels")
     scene, report, _ = fit_scene(args.scene, cfg, args.budget, args.downscale, ckpt, size=args.size,
-                                 device=resolve_device(args.device), medium=args.medium)
+                                 device=args.device, medium=args.medium)
     throughput = report.pop("_throughput", None)
     save_scene(scene, out)
     if ckpt is not None and ckpt.exists():
@@ -127,6 +128,9 @@ def fit_command(args) -> int:
 
 def render_scene(scene: Scene, views: int, size: int, show_progress: bool = True) -> np.ndarray:
     """The scene's orbit views (views, size, size, 3) float32 RGB in [0, 1] (torch reference renderer)."""
+    import torch
+
+    from .decoder import load_decoder
     from .render import render_views
     c2w, intr = orbit_cameras(scene, views, size)
     bar = progress(views, "render", unit="view") if show_progress else None
@@ -153,8 +157,11 @@ def render_command(args) -> int:
 
 
 def mesh_command(args) -> int:
+    import torch
+
     from snapshot3d.meshing import density_to_mesh, unit_grid, write_mesh
 
+    from .decoder import load_decoder
     from .field import decode, sample_planes
     from .sampler import BoxFrame
 
