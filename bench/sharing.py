@@ -9,7 +9,8 @@ Rows (codec_sharing.csv), per scene, host and distortion (3 seeds for the crops 
 are random): `meta_read` (the mark read), `meta_wrong` (read, and not what was written: must stay 0),
 `meta_ms`, `restore_psnr` (20 orbit views of the restored planes against the original planes'),
 `host_psnr`/`host_ssim` of the snapshot, and `false_read` on the unmarked host given the same distortion.
-Writes codec_sharing.{csv,json,png}."""
+Writes codec_sharing.{csv,json,png} and codec_sharing_side_by_side.png (spot in coffee: the original views,
+then those restored from the PNG, from a JPEG-75 copy and from a 1080-px JPEG-90 copy, none with text)."""
 from __future__ import annotations
 
 import time
@@ -121,8 +122,27 @@ def bench_sharing(scenes: list[str], hosts: dict, refine: int, size: int, out: P
         "scenes": [Path(p).stem for p in scenes], "hosts": list(hosts), "refine": refine, "view_size": size,
         "targets": TARGETS, "seconds": round(time.time() - t0, 1), "summary": summary})
     _chart(summary, out / "codec_sharing.png")
+    side_by_side(load_scene_file(scenes[0]), next(iter(hosts.values())), refine, size, out / "codec_sharing_side_by_side.png")
     blocks.finish()
     return doc
+
+
+def side_by_side(scene, host: np.ndarray, refine: int, size: int, path: Path) -> None:
+    """Rows: the snapshot (or its copy) and 4 orbit views: original planes, then restored from a PNG, a
+    JPEG-75 copy and a 1080-px JPEG-90 copy, each read with no text (metadata from the pixels)."""
+    from snapshot3d.images import write_png
+    from snapshot3d.train.codec.commands import snapshot_for
+
+    judge, pick = ViewJudge(scene, size), [0, 5, 10, 15]
+    snap = snapshot_for("file", host, scene, 1.0, refine)
+    rows = [(snap, judge.ref[pick])]
+    for name in ("png", "jpeg75", "1080 px (2.8x)"):
+        copy = SHARING[name][0](snap, np.random.default_rng(0))
+        rgb, meta, _ = snapshot_in_image("copy", copy, None)
+        rows.append((copy, judge.views(restore_planes(rgb, meta)[0])[pick]))
+    fig = np.concatenate([np.concatenate([cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA) / 255.0, *views],
+                                         axis=1) for img, views in rows], axis=0)
+    write_png(path, fig)
 
 
 def _chart(summary: dict, path: Path) -> None:
