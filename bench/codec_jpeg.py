@@ -26,17 +26,11 @@ from snapshot3d.train.codec.refine import snapshot_of
 from snapshot3d.viewer.render import render_views
 from snapshot3d.viewer.runtime import field_models
 
-from .common import pyplot, write_report
+from .common import jpeg_copy, pyplot, write_report
 
 __all__ = ["bench_codec_jpeg_command", "DISTORTIONS"]
 
 SIZE = 128
-
-
-def _jpeg(img: np.ndarray, quality: int, sampling: int) -> np.ndarray:
-    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR),
-                           [cv2.IMWRITE_JPEG_QUALITY, quality, cv2.IMWRITE_JPEG_SAMPLING_FACTOR, sampling])
-    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
 
 def _chroma_420(img: np.ndarray) -> np.ndarray:
@@ -62,11 +56,11 @@ def _shift(img: np.ndarray, px: float) -> np.ndarray:
 # name -> snapshot (380, 380, 3) uint8 RGB -> what the restore network sees
 DISTORTIONS = {
     "none": lambda x: x,
-    "jpeg95 4:2:0": lambda x: _jpeg(x, 95, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420),
-    "jpeg95 4:4:4": lambda x: _jpeg(x, 95, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444),
-    "jpeg90 4:2:0": lambda x: _jpeg(x, 90, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420),
-    "jpeg75 4:2:0": lambda x: _jpeg(x, 75, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420),
-    "jpeg75 4:4:4": lambda x: _jpeg(x, 75, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444),
+    "jpeg95 4:2:0": lambda x: jpeg_copy(x, 95, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420),
+    "jpeg95 4:4:4": lambda x: jpeg_copy(x, 95, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444),
+    "jpeg90 4:2:0": lambda x: jpeg_copy(x, 90, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420),
+    "jpeg75 4:2:0": lambda x: jpeg_copy(x, 75, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420),
+    "jpeg75 4:4:4": lambda x: jpeg_copy(x, 75, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444),
     "chroma 4:2:0 only": _chroma_420,
     "noise sigma 4/255": lambda x: _noise(x, 4.0),
     "blur sigma 1 px": lambda x: cv2.GaussianBlur(x, (0, 0), 1.0),

@@ -19,7 +19,8 @@ from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr as _psnr
 
 __all__ = ["SEVERITIES", "PHYSICAL", "write_report", "write_rows", "psnr", "median", "capture_seeds",
-           "through_channel", "ViewJudge", "pyplot", "bench_progress", "update_budget_curve", "RowBlocks"]
+           "through_channel", "ViewJudge", "pyplot", "bench_progress", "update_budget_curve", "RowBlocks",
+           "jpeg_copy"]
 
 SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")
 PHYSICAL = ("mild", "moderate", "severe")
@@ -75,6 +76,13 @@ class RowBlocks:
 
     def finish(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+def jpeg_copy(rgb: np.ndarray, quality: int, sampling: int = cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420) -> np.ndarray:
+    """(H, W, 3) uint8 RGB through an OpenCV JPEG file at `quality` and chroma `sampling` (default 4:2:0)."""
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
+                           [cv2.IMWRITE_JPEG_QUALITY, quality, cv2.IMWRITE_JPEG_SAMPLING_FACTOR, sampling])
+    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
 
 def psnr(a, b) -> float:

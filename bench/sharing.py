@@ -27,7 +27,7 @@ from snapshot3d.scanner.snapfile import snapshot_in_image
 from snapshot3d.scene import load_scene_file
 from snapshot3d.viewer.media import restore_planes
 
-from .common import RowBlocks, ViewJudge, median, psnr, pyplot, write_report
+from .common import RowBlocks, ViewJudge, jpeg_copy, median, psnr, pyplot, write_report
 
 __all__ = ["SHARING", "bench_sharing", "TARGETS"]
 
@@ -35,36 +35,30 @@ TARGETS = {"meta_read": "100% for JPEG >= 60, resized 0.67x-2.8x, 4-px crops", "
            "lossless restore_psnr": 35, "host_psnr": 38, "jpeg75 restore_psnr": 30, "resize256 restore_psnr": 25}
 
 
-def _jpeg(rgb: np.ndarray, quality: int) -> np.ndarray:
-    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [
-        cv2.IMWRITE_JPEG_QUALITY, quality, cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420])
-    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-
-
 def _resize(rgb: np.ndarray, n: int, quality: int = 90) -> np.ndarray:
     interp = cv2.INTER_AREA if n < rgb.shape[0] else cv2.INTER_CUBIC
-    return _jpeg(cv2.resize(rgb, (n, n), interpolation=interp), quality)
+    return jpeg_copy(cv2.resize(rgb, (n, n), interpolation=interp), quality)
 
 
 def _crop(rgb: np.ndarray, px: int, rng) -> np.ndarray:
     top, left = rng.integers(0, px + 1, 2)
     h, w = rgb.shape[:2]
-    return _jpeg(np.ascontiguousarray(rgb[top:h - (px - top), left:w - (px - left)]), 90)
+    return jpeg_copy(np.ascontiguousarray(rgb[top:h - (px - top), left:w - (px - left)]), 90)
 
 
 def _pad(rgb: np.ndarray, px: int, rng) -> np.ndarray:
     top, left = rng.integers(0, px + 1, 2)
-    return _jpeg(cv2.copyMakeBorder(rgb, top, px - top, left, px - left, cv2.BORDER_CONSTANT, value=(255,) * 3), 90)
+    return jpeg_copy(cv2.copyMakeBorder(rgb, top, px - top, left, px - left, cv2.BORDER_CONSTANT, value=(255,) * 3), 90)
 
 
 SHARING = {  # name -> (copy(rgb, rng), seeds)
     "png": (lambda x, r: x, 1),
-    "jpeg95": (lambda x, r: _jpeg(x, 95), 1),
-    "jpeg85": (lambda x, r: _jpeg(x, 85), 1),
-    "jpeg75": (lambda x, r: _jpeg(x, 75), 1),
-    "jpeg60": (lambda x, r: _jpeg(x, 60), 1),
-    "jpeg75 twice": (lambda x, r: _jpeg(_jpeg(x, 75), 75), 1),
-    "jpeg85 then 60": (lambda x, r: _jpeg(_jpeg(x, 85), 60), 1),
+    "jpeg95": (lambda x, r: jpeg_copy(x, 95), 1),
+    "jpeg85": (lambda x, r: jpeg_copy(x, 85), 1),
+    "jpeg75": (lambda x, r: jpeg_copy(x, 75), 1),
+    "jpeg60": (lambda x, r: jpeg_copy(x, 60), 1),
+    "jpeg75 twice": (lambda x, r: jpeg_copy(jpeg_copy(x, 75), 75), 1),
+    "jpeg85 then 60": (lambda x, r: jpeg_copy(jpeg_copy(x, 85), 60), 1),
     "256 px (0.67x)": (lambda x, r: _resize(x, 256), 1),
     "256 px jpeg75": (lambda x, r: _resize(x, 256, 75), 1),
     "512 px (1.35x)": (lambda x, r: _resize(x, 512), 1),
