@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["orbit_cameras", "pixel_rays", "look_at", "orbit_poses", "focal_from_fov", "project"]
+__all__ = ["orbit_cameras", "view_camera", "pixel_rays", "look_at", "orbit_poses", "focal_from_fov", "project"]
 
 
 def focal_from_fov(fov_x_rad: float, width: int) -> float:
@@ -80,3 +80,17 @@ def orbit_cameras(orbit, views: int, size: int):
     c2w = orbit_poses(views, orbit.radius, orbit.elevation_deg, orbit.target, up=formats.WORLD_UP).astype(np.float32)
     f = focal_from_fov(np.deg2rad(orbit.fov_deg), size)
     return c2w, np.tile(np.array([f, f, size / 2, size / 2], np.float32), (views, 1))
+
+
+def view_camera(orbit, azimuth_deg: float, elevation_deg: float, distance: float | None, size: int):
+    """One camera of a scene's orbit moved anywhere on its sphere: c2w (1, 4, 4) float32 OpenGL and
+    intrinsics (1, 4), looking at the orbit's target from `distance` world units (None: the orbit's
+    radius) at `azimuth_deg` (0: the +x side, as view 0 of `orbit_cameras`; counter-clockwise seen from
+    above) and `elevation_deg` above the xy plane, with the orbit's field of view over size x size."""
+    from . import formats
+
+    radius = orbit.radius if distance is None else float(distance)
+    c2w = orbit_poses(1, radius, elevation_deg, orbit.target, azimuth0_deg=azimuth_deg,
+                      up=formats.WORLD_UP).astype(np.float32)
+    f = focal_from_fov(np.deg2rad(orbit.fov_deg), size)
+    return c2w, np.array([[f, f, size / 2, size / 2]], np.float32)

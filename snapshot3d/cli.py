@@ -141,6 +141,11 @@ def _codec_parsers(sub) -> None:
     dest.add_argument("--install", action="store_true",
                       help="overwrite the models the package ships (snapshot3d/assets/), which decode uses")
 
+    sv = _add(sub, "serve", "the scan-and-view API and the phone page: upload a photo, turn the scene (no torch)",
+              _run("snapshot3d.viewer.commands", "serve_command"))
+    from .viewer.serve_config import ServeConfig  # a torch-free dataclass
+    add_dataclass_options(sv, ServeConfig)
+
     d = _add(sub, "demo", "decode the bundled example photo into 20 views (seconds, no torch)",
              _run("snapshot3d.viewer.demo", "demo_command"))
     d.add_argument("-o", "--output", default="snapshot3d-demo", help="output folder")

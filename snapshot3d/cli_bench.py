@@ -40,6 +40,15 @@ def add_bench_commands(bsub, add) -> None:
     bf.add_argument("--scenes", default="spot,lego", help="comma-separated bench scenes; a subset writes fit_<names>.*")
     bf.add_argument("--merge", action="store_true", help="only combine fit_<scene>.json files into fit.*")
 
+    bv = add(bsub, "serve", "snapshot3d serve under concurrent uploads (answers, latency, memory, /render) and the "
+                            "page in headless Chromium (first view, frame rate, screenshots)",
+             _run("snapshot3d.bench.serve", "bench_serve_command"))
+    _out(bv)
+    bv.add_argument("--uploads", type=int, default=100, help="uploads sent at once")
+    bv.add_argument("--renders", type=int, default=50, help="/render requests timed one after another")
+    bv.add_argument("--deadline-s", type=float, default=300.0, help="clients stop retrying after this")
+    _quick(bv, uploads=6, renders=5)
+
     bs = add(bsub, "scan", "scanner on simulated photos: detection, corner error, PSNR, speed; charts",
              _run("snapshot3d.bench.scan", "bench_scan_command"))
     _out(bs)

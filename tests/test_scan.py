@@ -1,14 +1,13 @@
 """The scanner: exact recovery from a lossless sheet, sub-pixel corners on simulated photos, real photos of
 printed ArUco markers, and one-line errors (non-zero exit, no output) for every kind of bad photo."""
 import json
-import struct
 import subprocess
 import sys
-import zlib
 
 import cv2
 import numpy as np
 import pytest
+from helpers import bomb_png
 
 from snapshot3d import formats
 from snapshot3d.builtin import shared_data_dir
@@ -134,17 +133,6 @@ def _assert_one_line_error(proc, match, *absent):
         assert not list(p.parent.glob(f".{p.name}.*")), "partial file left behind"
 
 
-def _bomb_png(path, n=20000):
-    """A real 20000x20000 all-black PNG (~400 KB): the zeros are compressed row by row."""
-    def chunk(tag, data):
-        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
-    co = zlib.compressobj(1)
-    row = b"\0" * (n + 1)
-    idat = b"".join(co.compress(row) for _ in range(n)) + co.flush()
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", n, n, 8, 0, 0, 0, 0))
-                     + chunk(b"IDAT", idat) + chunk(b"IEND", b""))
-
-
 def test_cli_scan_ok_writes_report(tmp_path, sheet):
     data, _, _ = simulate(sheet, "jpeg90", 0)
     (tmp_path / "p.jpg").write_bytes(data)
@@ -168,7 +156,7 @@ def test_cli_bad_files(tmp_path, sheet):
     _assert_one_line_error(run("scan", str(tmp_path / "garbled.jpg"), "-o", str(out)), "corrupt", out)
     (tmp_path / "notes.jpg").write_text("this is a text file, not a photo\n")
     _assert_one_line_error(run("scan", str(tmp_path / "notes.jpg"), "-o", str(out)), "not an image", out)
-    _bomb_png(tmp_path / "bomb.png")
+    bomb_png(tmp_path / "bomb.png")
     _assert_one_line_error(run("scan", str(tmp_path / "bomb.png"), "-o", str(out)), "decompression bomb", out)
     _assert_one_line_error(run("scan", str(tmp_path / "nope.jpg"), "-o", str(out)), "not found", out)
 

@@ -114,3 +114,21 @@ def restore_command(args) -> int:
     print(f"wrote {args.output}: {meta.planes[0]}x{meta.planes[0]} planes, {meta.planes[1]} channels, codec "
           f"{meta.codec}; restore {secs * 1000:.0f} ms")
     return 0
+
+
+def serve_command(args) -> int:
+    """`snapshot3d serve`: the API and the page (uvicorn), until interrupted."""
+    import uvicorn
+
+    from snapshot3d.options import config_from_args
+
+    from .serve_config import ServeConfig
+    from .server import create_app
+
+    cfg = config_from_args(ServeConfig, args)
+    if not 1 <= cfg.max_decodes <= 64 or cfg.timeout_s <= 0 or cfg.max_scenes < 1:
+        raise UserError("--max-decodes must be in 1..64, --timeout-s > 0 and --max-scenes >= 1")
+    app = create_app(cfg)
+    print(f"snapshot3d serve: open http://{cfg.host}:{cfg.port}/ (API docs at /docs); scenes in {cfg.cache_dir()}")
+    uvicorn.run(app, host=cfg.host, port=cfg.port, log_level="warning")
+    return 0

@@ -25,7 +25,7 @@ from .quality import quality_estimate
 from .render import RenderConfig, pad_planes, render_views
 from .runtime import field_models
 
-__all__ = ["Decoded", "decode_photo", "scene_from_meta"]
+__all__ = ["Decoded", "DecodedScene", "decode_scene", "decode_photo", "scene_from_meta"]
 
 
 @dataclass
@@ -88,18 +88,48 @@ def _read(path):
     return res, res.snapshot, _meta(res.qr), "photo of a sheet"
 
 
-def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORBIT_SIZE,
-                 cfg: RenderConfig = RenderConfig(), on_view=None) -> Decoded:
+@dataclass
+class DecodedScene:
+    """A photo or snapshot file turned into a scene and its baked grid, before any view is rendered
+    (what `snapshot3d serve` keeps; `decode_photo` renders the orbit from it)."""
+    scene: Scene
+    baked: Baked
+    planes: np.ndarray  # (3, C, R, R) float32 in [-1, 1], as restored (before quantisation)
+    report: dict
+
+
+def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
+    """Scan (or read the snapshot file), restore and bake; the report has the timings of these stages."""
     t0 = time.perf_counter()
     res, snapshot, meta, source = _read(path)
     t1 = time.perf_counter()
     planes, codec_info = restore_planes(snapshot, meta)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
-    models = field_models()
-    baked = bake_field(models, pad_planes(planes), Frame.from_box(scene.box), cfg.bake)
+    baked = bake_field(field_models(), pad_planes(planes), Frame.from_box(scene.box), cfg.bake)
     t3 = time.perf_counter()
-    c2w, intr = orbit_cameras(scene.orbit, views, size)
+    ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
+    pilot = None if res is None else res.pilot_psnr
+    report = {
+        "source": source,
+        "detected": True, "confidence": None if res is None else round(float(res.confidence), 3),
+        "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3)},
+        "codec": meta.codec, "medium": formats.CODEC_MEDIUM[meta.codec],
+        "quality_estimate": quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected")),
+        "planes": list(meta.planes), "render": cfg.__dict__,
+        "field_evaluations": baked.evaluated,
+        "scan": None if res is None else {k: v for k, v in res.report().items()
+                                          if k in ("corners", "reprojection_px", "qr")},
+    }
+    return DecodedScene(scene, baked, planes, report)
+
+
+def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORBIT_SIZE,
+                 cfg: RenderConfig = RenderConfig(), on_view=None) -> Decoded:
+    t0 = time.perf_counter()
+    ds = decode_scene(path, cfg)
+    t3 = time.perf_counter()
+    c2w, intr = orbit_cameras(ds.scene.orbit, views, size)
     first = []
 
     def _tick(i):  # may run on worker threads: list.append is atomic
@@ -107,21 +137,11 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
             first.append(time.perf_counter())
         if on_view is not None:
             on_view(i)
-    out = render_views(models, planes, scene.box, c2w, intr, size, size, cfg, baked=baked, on_view=_tick)
+    out = render_views(field_models(), ds.planes, ds.scene.box, c2w, intr, size, size, cfg, baked=ds.baked,
+                       on_view=_tick)
     t4 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
-    pilot = None if res is None else res.pilot_psnr
-    report = {
-        "source": source,
-        "detected": True, "confidence": None if res is None else round(float(res.confidence), 3),
-        "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3), "render": ms(t3, t4),
-                       "first_view": ms(t0, first[0]) if first else None},
-        "decode_ms": ms(t0, t4),
-        "codec": meta.codec, "medium": formats.CODEC_MEDIUM[meta.codec],
-        "quality_estimate": quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected")),
-        "planes": list(meta.planes), "views": views, "size": size, "render": cfg.__dict__,
-        "field_evaluations": baked.evaluated,
-        "scan": None if res is None else {k: v for k, v in res.report().items()
-                                          if k in ("corners", "reprojection_px", "qr")},
-    }
-    return Decoded(out, scene, report, baked)
+    report = dict(ds.report, views=views, size=size, decode_ms=ms(t0, t4))
+    report["timings_ms"] = dict(ds.report["timings_ms"], render=ms(t3, t4),
+                                first_view=ms(t0, first[0]) if first else None)
+    return Decoded(out, ds.scene, report, ds.baked)

@@ -56,7 +56,9 @@ def composite(logit: np.ndarray, rgb: np.ndarray, delta: np.ndarray) -> np.ndarr
     """Volume rendering (DESIGN 1.1) of (N, S) density logits and (N, S, 3) colours with lengths delta
     (N, S) or (N, 1) -> (N, 3) over the white background. Weight i is T_i - T_{i+1} (transmittance
     before and after sample i), which is T_i (1 - exp(-tau_i))."""
-    after = np.exp(-np.cumsum(_tau(logit, delta), axis=1))
+    after = _tau(logit, delta)  # then, in place (one buffer): optical depth, transmittance after each sample
+    np.cumsum(after, axis=1, out=after)
+    np.exp(np.negative(after, out=after), out=after)
     w = -np.diff(after, axis=1, prepend=np.float32(1.0))
     return np.einsum("ns,nsc->nc", w, rgb) + after[:, -1:] * formats.BACKGROUND
 

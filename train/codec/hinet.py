@@ -5,7 +5,7 @@ plus the config as JSON) beside a JSON summary of the run that made them.
 
 `embed_planes`: host (380, 380, 3) float RGB in [0, 1] and planes (3, C, R, R) in [-1, 1] ->
 snapshot (380, 380, 3) uint8 RGB. `restore_secret`: snapshot (380, 380, 3) uint8 RGB -> the secret
-(24, 190, 190) float32, turned into planes by `snapshot3d.codec_layout.secret_to_planes`.
+(24, 95, 95) float32 (24 = 3 planes x 8 channels on the 95x95 grid of two Haar levels), turned into planes by `snapshot3d.codec_layout.secret_to_planes`.
 """
 from __future__ import annotations
 

@@ -1,0 +1,189 @@
+// The page: upload a photo (progress), then turn the decoded scene. WebGL2 renders the baked grid in the
+// browser; without WebGL2 the page shows frames rendered by the server (/render). window.snapshot3d
+// exposes the state for tests and for measuring frame rates.
+"use strict";
+
+(() => {
+  const $ = (id) => document.getElementById(id);
+  const state = { mode: null, sceneId: null, header: null, azimuth: 0, elevation: 20, distance: 1, radius: 1,
+                  frames: 0, ready: false, error: null, firstViewMs: null };
+  window.snapshot3d = state;
+  let renderer = null, dirty = false, started = 0, moving = 0, settle = null;
+  const FULL = 380, MOVING = 190;  // drawing-buffer size at rest, and while a finger moves (4x fewer rays)
+
+  // while the pose changes, draw at MOVING resolution; 200 ms after the last change, once more at FULL
+  function interacting() {
+    moving = performance.now();
+    clearTimeout(settle);
+    settle = setTimeout(() => { moving = 0; requestDraw(); }, 200);
+  }
+
+  function status(text, isError = false) {
+    $("status").textContent = text;
+    $("status").classList.toggle("error", isError);
+    if (isError) state.error = text;
+  }
+
+  // multipart upload with progress; resolves with {status, json}
+  function upload(file) {
+    return new Promise((resolve, reject) => {
+      const xhr = new XMLHttpRequest();
+      const form = new FormData();
+      form.append("file", file, file.name || "photo.jpg");
+      xhr.open("POST", "/v1/decode");
+      xhr.responseType = "json";
+      xhr.upload.onprogress = (e) => {
+        if (e.lengthComputable) { $("progress").value = (100 * e.loaded) / e.total; status(`Uploading ${Math.round((100 * e.loaded) / e.total)}%`); }
+      };
+      xhr.upload.onload = () => { $("progress").removeAttribute("value"); status("Decoding: finding the sheet, restoring the scene…"); };
+      xhr.onload = () => resolve({ status: xhr.status, json: xhr.response, retry: xhr.getResponseHeader("Retry-After") });
+      xhr.onerror = () => reject(new Error("the server could not be reached"));
+      xhr.send(form);
+    });
+  }
+
+  function requestDraw() {
+    if (!dirty) { dirty = true; requestAnimationFrame(drawNow); }
+  }
+
+  function drawNow() {
+    dirty = false;
+    if (state.mode === "webgl2") {
+      const canvas = $("view"), px = moving ? MOVING : FULL;
+      if (canvas.width !== px) { canvas.width = px; canvas.height = px; }
+      renderer.draw(state.azimuth, state.elevation, state.distance);
+      state.frames++;
+    } else if (state.mode === "frames") {
+      fetchFrame();
+    }
+    if (state.firstViewMs === null) state.firstViewMs = Math.round(performance.now() - started);
+  }
+
+  // fallback: one server frame in flight at a time, always for the latest pose
+  let frameBusy = false, frameAgain = false;
+  function fetchFrame() {
+    if (frameBusy) { frameAgain = true; return; }
+    frameBusy = true;
+    const img = $("frame");
+    const q = new URLSearchParams({ azimuth: state.azimuth.toFixed(2), elevation: state.elevation.toFixed(2),
+                                    distance: state.distance.toFixed(4), size: "380" });
+    img.onload = img.onerror = () => { frameBusy = false; state.frames++; if (frameAgain) { frameAgain = false; fetchFrame(); } };
+    img.src = `/v1/scenes/${state.sceneId}/render?${q}`;
+  }
+
+  function showScene(header, grid) {
+    state.header = header;
+    state.radius = state.distance = header.orbit.radius;
+    state.elevation = header.orbit.elevation_deg;
+    state.azimuth = 0;
+    const canvas = $("view");
+    renderer = grid ? S3DGL.create(canvas, grid) : null;
+    state.mode = renderer ? "webgl2" : "frames";
+    canvas.hidden = state.mode !== "webgl2";
+    $("frame").hidden = state.mode !== "frames";
+    $("hint").hidden = false;
+    requestDraw();
+    state.ready = true;
+  }
+
+  function showReport(body) {
+    const q = body.report.quality_estimate || {};
+    const el = $("quality");
+    el.hidden = false;
+    if (q.restore_psnr_expected_db != null) {
+      el.textContent = `Expected quality: about ${q.restore_psnr_expected_db.toFixed(1)} dB` +
+        (q.restore_psnr_expected_db < 22 ? " (poor: retake the photo square on, in focus, in even light)" : "");
+      el.classList.toggle("poor", q.restore_psnr_expected_db < 22);
+    } else {
+      el.textContent = "Expected quality: no estimate for this kind of input.";
+    }
+    const l = $("links");
+    l.hidden = false;
+    l.innerHTML = "";
+    for (const [text, href] of [["scene.s3d", body.scene], ["mesh.glb", body.mesh], ["view 0", body.views[0]]]) {
+      const a = document.createElement("a");
+      a.href = href; a.textContent = text; a.download = "";
+      l.appendChild(a);
+    }
+  }
+
+  async function decode(file) {
+    state.ready = false; state.error = null; state.firstViewMs = null;
+    started = performance.now();
+    $("progress").hidden = false; $("progress").value = 0;
+    try {
+      const res = await upload(file);
+      if (res.status !== 200) {
+        const why = (res.json && res.json.error) || `the server answered ${res.status}`;
+        throw new Error(res.status === 503 ? `${why} (try again in ${res.retry || "a few"} s)` : why);
+      }
+      const body = res.json;
+      state.sceneId = body.scene_id;
+      status("Loading the scene…");
+      const grid = S3DGrid.parse(await (await fetch(body.grid)).arrayBuffer());
+      showScene(grid.header, document.createElement("canvas").getContext("webgl2") ? grid : null);
+      showReport(body);
+      const t = body.report.timings_ms;
+      status(`Decoded in ${Math.round(t.scan + t.restore + t.bake)} ms (${body.report.source}); ` +
+             (state.mode === "webgl2" ? "rendered here with WebGL2." : "frames from the server (no WebGL2)."));
+    } catch (e) {
+      status(`Could not decode this photo: ${e.message}`, true);
+    } finally {
+      $("progress").hidden = true;
+    }
+  }
+
+  $("photo").addEventListener("change", (e) => { if (e.target.files[0]) decode(e.target.files[0]); });
+
+  // drag to orbit, pinch or wheel to zoom
+  const stage = $("stage"), pointers = new Map();
+  let pinch0 = null;
+  stage.addEventListener("pointerdown", (e) => { pointers.set(e.pointerId, [e.clientX, e.clientY]); stage.setPointerCapture(e.pointerId); });
+  stage.addEventListener("pointermove", (e) => {
+    if (!pointers.has(e.pointerId) || !state.ready) return;
+    const [x0, y0] = pointers.get(e.pointerId);
+    pointers.set(e.pointerId, [e.clientX, e.clientY]);
+    if (pointers.size === 1) {
+      state.azimuth -= (e.clientX - x0) * 0.5;
+      state.elevation = Math.max(-85, Math.min(85, state.elevation + (e.clientY - y0) * 0.5));
+    } else if (pointers.size === 2) {
+      const [a, b] = [...pointers.values()];
+      const d = Math.hypot(a[0] - b[0], a[1] - b[1]);
+      if (pinch0) zoom(pinch0 / d);
+      pinch0 = d;
+    }
+    interacting();
+    requestDraw();
+  });
+  const release = (e) => { pointers.delete(e.pointerId); pinch0 = null; };
+  stage.addEventListener("pointerup", release);
+  stage.addEventListener("pointercancel", release);
+  stage.addEventListener("wheel", (e) => { e.preventDefault(); if (state.ready) { zoom(Math.exp(e.deltaY * 0.001)); interacting(); requestDraw(); } },
+                         { passive: false });
+  function zoom(f) { state.distance = Math.max(0.3 * state.radius, Math.min(4 * state.radius, state.distance * f)); }
+
+  // frames per second of the client renderer at size x size over n synchronous frames (each one finished)
+  state.measureFps = (n = 30, size = FULL) => {
+    if (state.mode !== "webgl2") return null;
+    const gl = renderer.gl, px = new Uint8Array(4), canvas = $("view");
+    canvas.width = canvas.height = size;
+    const t0 = performance.now();
+    for (let i = 0; i < n; i++) {
+      renderer.draw(state.azimuth + i * 3, state.elevation, state.distance);
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);  // waits for the frame
+    }
+    const fps = (1000 * n) / (performance.now() - t0);
+    canvas.width = canvas.height = FULL;
+    renderer.draw(state.azimuth, state.elevation, state.distance);
+    return fps;
+  };
+  state.pose = (azimuth, elevation, distance) => {
+    state.azimuth = azimuth; state.elevation = elevation; state.distance = distance ?? state.radius;
+    if (state.mode === "webgl2") {
+      $("view").width = $("view").height = FULL;
+      renderer.draw(state.azimuth, state.elevation, state.distance);
+      state.frames++;
+    }
+    else fetchFrame();
+  };
+})();
