@@ -38,6 +38,10 @@ def export_command(args) -> int:
             os.replace(info["path"], final)
             info["path"] = final.name  # relative to export.json's folder
         (out / "export.json").write_text(json.dumps({"models": models, "parity": parity}, indent=2) + "\n")
+        if args.vectors:
+            from .conformance import write_vectors
+            write_vectors(args.vectors, {k: out / v["path"] for k, v in models.items()})
+            print(f"wrote the conformance vectors of these models to {args.vectors}")
     finally:
         shutil.rmtree(stage, ignore_errors=True)
     print(f"wrote {', '.join(m['path'] for m in models.values())} and export.json to {out}/")

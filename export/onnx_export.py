@@ -56,10 +56,18 @@ def _metadata(codec: str) -> dict:
             "orbit_fov_deg": str(formats.ORBIT_FOV_DEG), "c_max": str(formats.C_MAX), "opset": str(OPSET)}
 
 
-def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str) -> int:
+def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str, out_shapes: dict | None = None) -> int:
+    """Metadata, doc string and declared output shapes (`out_shapes`: name -> dims, int or symbolic name,
+    where the exporter left a dimension it could not name), checked, written atomically."""
     import onnx
 
     model = onnx.load_from_string(buf)
+    for out in model.graph.output:
+        for dim, want in zip(out.type.tensor_type.shape.dim, (out_shapes or {}).get(out.name, ())):
+            if isinstance(want, int):
+                dim.dim_value = want
+            else:
+                dim.dim_param = want
     for k, v in _metadata(codec).items():
         model.metadata_props.append(onnx.StringStringEntryProto(key=k, value=v))
     model.producer_name = producer
@@ -72,12 +80,13 @@ def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str) -> int
     return len(data)
 
 
-def _export(module, args, names_in, names_out, dynamic, path: Path, kind: str, codec: str = formats.FILE_CODEC) -> int:
+def _export(module, args, names_in, names_out, dynamic, path: Path, kind: str, codec: str = formats.FILE_CODEC,
+            out_shapes: dict | None = None) -> int:
     buf = io.BytesIO()
     with torch.no_grad():
         torch.onnx.export(module, args, buf, input_names=names_in, output_names=names_out, opset_version=OPSET,
                           dynamic_axes=dynamic, do_constant_folding=True, dynamo=False)
-    return _finish(buf.getvalue(), path, f"snapshot3d {kind}", kind, codec)
+    return _finish(buf.getvalue(), path, f"snapshot3d {kind}", kind, codec, out_shapes)
 
 
 def export_restore(codec, path: Path) -> int:
@@ -90,7 +99,7 @@ def export_project(decoder, path: Path) -> int:
     planes = torch.rand(3, formats.C_MAX, 64, 64) * 2 - 1
     dynamic = {"planes": {2: "R", 3: "R"}, "interp": {0: "B", 1: "R"}, "tables": {1: "T"}}
     return _export(ProjectGraph(decoder).eval(), (planes, torch.rand(96, 64)), PROJECT_INPUTS, PROJECT_OUTPUTS,
-                   dynamic, path, "project")
+                   dynamic, path, "project", out_shapes={"tables": [3, "T", decoder.hidden]})
 
 
 def export_field(decoder, path: Path) -> int:

@@ -140,6 +140,8 @@ def _codec_parsers(sub) -> None:
     dest.add_argument("-o", "--output", help="folder to write the models and export.json into")
     dest.add_argument("--install", action="store_true",
                       help="overwrite the models the package ships (snapshot3d/assets/), which decode uses")
+    ex.add_argument("--vectors", help="also write conformance vectors of the exported models here (.npz; the "
+                                      "committed ones are tests/data/onnx-conformance.npz, see docs/onnx-contract.md)")
 
     sv = _add(sub, "serve", "the scan-and-view API and the phone page: upload a photo, turn the scene (no torch)",
               _run("snapshot3d.viewer.commands", "serve_command"))

@@ -1,0 +1,60 @@
+"""Conformance vectors for third-party clients of the ONNX models (docs/onnx-contract.md): inputs and the
+outputs the shipped graphs give for them, computed with onnxruntime (no torch), so that a port (onnxruntime
+on a phone, onnxruntime-web) can check itself. `snapshot3d export ... --vectors FILE` writes them for the
+models it just exported; `tests/test_onnx_contract.py` checks the shipped models against the committed ones.
+
+FILE (.npz) holds, for the snapshot file `tests/data/spot-snapshot.png` (its RGB pixels are the input):
+- `restore_secret` float16 (24, 95, 95): the restore graph's output (stored at half precision);
+- `planes` float32 (3, C, R, R): the scene's planes after the documented unspread and 8-bit rounding;
+- `project_interp` float32 (B, R), `project_tables` float32 (3, B*B, 32): the project graph's input
+  (with `planes` zero-padded to 12 channels) and output, B = 16;
+- `field_rows` int64 (M, 3), `field_density_logit` float32 (M,), `field_rgb` float32 (M, 3): the field
+  graph's input (with `project_tables`) and outputs for M = 64 grid cells;
+- `meta` (text): the snapshot's metadata payload (the QR text)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["VECTORS_INPUT", "GRID", "POINTS", "make_vectors", "write_vectors"]
+
+VECTORS_INPUT = Path(__file__).resolve().parents[1] / "tests" / "data" / "spot-snapshot.png"
+GRID = 16
+POINTS = 64
+
+
+def make_vectors(models: dict, snapshot_png: Path = VECTORS_INPUT) -> dict:
+    """models: kind -> .onnx path ('restore', 'project', 'field') -> the arrays above."""
+    from snapshot3d import codec_layout
+    from snapshot3d.scanner.qr import encode_payload
+    from snapshot3d.scanner.snapfile import read_snapshot
+    from snapshot3d.scene import dequantize_planes, quantize_planes
+    from snapshot3d.viewer.bake import cell_coords, interp_matrix
+    from snapshot3d.viewer.render import pad_planes
+    from snapshot3d.viewer.runtime import session
+
+    rgb, meta = read_snapshot(snapshot_png, None)
+    res, channels = meta.planes
+    x = (rgb.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
+    secret = session(str(models["restore"])).run(None, {"snapshot": x})[0][0]
+    planes = dequantize_planes(quantize_planes(codec_layout.secret_to_planes(secret / (meta.strength or 1.0), res,
+                                                                             channels)))
+    interp = interp_matrix(cell_coords(GRID), res)
+    tables = session(str(models["project"])).run(None, {"planes": pad_planes(planes), "interp": interp})[0]
+    cells = np.random.default_rng(0).integers(0, GRID, (POINTS, 3))
+    rows = np.stack([cells[:, 1] * GRID + cells[:, 0], cells[:, 2] * GRID + cells[:, 0],
+                     cells[:, 2] * GRID + cells[:, 1]], 1).astype(np.int64)
+    logit, colour = session(str(models["field"])).run(None, {"tables": tables, "rows": rows})
+    return {"restore_secret": secret.astype(np.float16), "planes": planes, "project_interp": interp,
+            "project_tables": tables, "field_cells": cells.astype(np.int64), "field_rows": rows,
+            "field_density_logit": logit, "field_rgb": colour, "meta": np.array(encode_payload(meta))}
+
+
+def write_vectors(path, models: dict) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".partial")
+    with open(tmp, "wb") as f:
+        np.savez_compressed(f, **make_vectors(models))
+    tmp.replace(path)
