@@ -9,7 +9,8 @@
   successful attempt), the server's peak resident memory (VmHWM), `/render` latency of 380x380 views.
 - Chromium (Debian's, via Playwright; skipped with a note when absent): time from choosing the example
   photo to the first view on the canvas, WebGL2 frame rate at 380x380 and at the 190x190 used while a
-  finger moves, and screenshots of the page (serve_page.png, serve_page_turned.png).
+  finger moves, a snapshot PNG decoded in the page itself (onnxruntime-web: models, restore, bake), and
+  screenshots of the page (serve_page.png, serve_page_turned.png, serve_page_local.png).
 
 Writes serve.csv (one row per upload), serve.json, serve.png under --out."""
 from __future__ import annotations
@@ -137,10 +138,19 @@ def _browser(base: str, out: Path) -> dict:
         page.mouse.up()
         page.wait_for_timeout(400)
         page.screenshot(path=str(out / "serve_page_turned.png"))
+        local = []
+        for _ in range(3):  # a snapshot PNG decoded in the page itself (onnxruntime-web), nothing uploaded
+            page.goto(base + "/")
+            page.set_input_files("#photo", str(SNAPSHOT))
+            page.wait_for_function("window.snapshot3d.ready || window.snapshot3d.error", timeout=120000)
+            local.append(page.evaluate("({source: snapshot3d.source, ...snapshot3d.local.timings_ms})"))
+        page.screenshot(path=str(out / "serve_page_local.png"))
         b.close()
     return {"first_view_ms": firsts, "first_view_ms_median": float(np.median(firsts)),
             "fps_380": fps380, "fps_380_median": float(np.median(fps380)),
-            "fps_190": fps190, "fps_190_median": float(np.median(fps190)), "webgl_renderer": renderer}
+            "fps_190": fps190, "fps_190_median": float(np.median(fps190)), "webgl_renderer": renderer,
+            "local_decode": local, "local_decode_ms_median": float(np.median([sum(v for k, v in r.items() if k != "source")
+                                                                               for r in local]))}
 
 
 def bench_serve_command(args) -> int:

@@ -33,6 +33,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.scanner.imageio_safe import image_size
 
 from .render import RenderConfig
+from .runtime import model_path
 from .serve_config import ServeConfig
 from .serving import BakedCache, mesh_file, orbit_view_png, render_png, write_scene
 from .store import SceneStore, StoreLimits
@@ -246,6 +247,13 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
         if "gzip" not in request.headers.get("accept-encoding", ""):
             return Response(gzip.decompress(data), media_type="application/octet-stream")
         return Response(data, media_type="application/octet-stream", headers={"Content-Encoding": "gzip"})
+
+    @app.get("/v1/models/{kind}.onnx", summary="the restore, project and field graphs (docs/onnx-contract.md)",
+             response_class=FileResponse)
+    def model(kind: str):
+        if kind not in ("restore", "project", "field"):
+            raise ApiError(404, f"no model {kind!r} (restore, project or field)")
+        return FileResponse(model_path(kind), media_type="application/octet-stream")
 
     @app.get("/", include_in_schema=False)
     def page():

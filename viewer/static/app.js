@@ -107,11 +107,30 @@
     }
   }
 
+  // a snapshot PNG with its metadata, decoded in this browser (local.js): nothing is uploaded
+  async function decodeHere(file, meta) {
+    status("Decoding in this browser…");
+    const got = await S3DLocal.decode(file, meta, (text) => status(text));
+    state.sceneId = null;
+    state.source = "browser";
+    showScene(got.header, got);
+    const q = $("quality");
+    q.hidden = false;
+    q.textContent = "Expected quality: no estimate for a snapshot file (it has no markers).";
+    $("links").hidden = true;
+    const t = got.timings_ms;
+    status(`Decoded in this browser in ${t.load + t.restore + t.bake} ms (models ${t.load}, restore ${t.restore}, ` +
+           `bake ${t.bake}); nothing was uploaded.`);
+    state.local = got;
+  }
+
   async function decode(file) {
-    state.ready = false; state.error = null; state.firstViewMs = null;
+    state.ready = false; state.error = null; state.firstViewMs = null; state.local = null;
     started = performance.now();
     $("progress").hidden = false; $("progress").value = 0;
     try {
+      const here = hasWebGL2() ? await S3DLocal.readable(file).catch(() => null) : null;
+      if (here) { await decodeHere(file, here.meta); return; }
       const res = await upload(file);
       if (res.status !== 200) {
         const why = (res.json && res.json.error) || `the server answered ${res.status}`;
@@ -119,9 +138,10 @@
       }
       const body = res.json;
       state.sceneId = body.scene_id;
+      state.source = "server";
       status("Loading the scene…");
       const grid = S3DGrid.parse(await (await fetch(body.grid)).arrayBuffer());
-      showScene(grid.header, document.createElement("canvas").getContext("webgl2") ? grid : null);
+      showScene(grid.header, hasWebGL2() ? grid : null);
       showReport(body);
       const t = body.report.timings_ms;
       status(`Decoded in ${Math.round(t.scan + t.restore + t.bake)} ms (${body.report.source}); ` +
@@ -133,7 +153,15 @@
     }
   }
 
+  function hasWebGL2() { return !!document.createElement("canvas").getContext("webgl2"); }
+
   $("photo").addEventListener("change", (e) => { if (e.target.files[0]) decode(e.target.files[0]); });
+  // drop a photo or a snapshot file anywhere on the page
+  document.addEventListener("dragover", (e) => e.preventDefault());
+  document.addEventListener("drop", (e) => {
+    e.preventDefault();
+    if (e.dataTransfer.files[0]) decode(e.dataTransfer.files[0]);
+  });
 
   // drag to orbit, pinch or wheel to zoom
   const stage = $("stage"), pointers = new Map();
