@@ -65,8 +65,7 @@ def composite(logit: np.ndarray, rgb: np.ndarray, delta: np.ndarray) -> np.ndarr
 
 def _baked_colour(baked: Baked, o, d, lo, hi, frame: Frame, samples: int) -> np.ndarray:
     """(N, 3) colours of rays from o (1, 3) along d (N, 3), from `samples` reads spread over their
-    windows [lo, hi] (N,)."""
-    lo, hi = clip_window(o, d, lo, hi, frame)
+    windows [lo, hi] (N,), already clipped to the box (`clip_window`)."""
     width = np.maximum(hi - lo, 0.0) / samples
     t = lo[:, None] + (np.arange(samples, dtype=np.float32)[None] + 0.5) * width[:, None]
     a, b = ray_cells(o, d, frame, baked.res)
@@ -91,6 +90,7 @@ def render_views(models, planes: np.ndarray, box, c2w: np.ndarray, intr: np.ndar
         lo, hi = probe_window(c2w[i], intr[i], width, height, frame, baked.sigma, cfg.probe_div, margin)
         lo, hi = lo.reshape(-1), hi.reshape(-1)
         hit = np.flatnonzero(np.isfinite(lo))
+        lo[hit], hi[hit] = clip_window(o, d[hit], lo[hit], hi[hit], frame)  # once per view, not per chunk
         chunks = [hit[j:j + cfg.chunk] for j in range(0, len(hit), cfg.chunk)]
         list((pool.map if pool is not None else map)(lambda idx: shade(i, o, d, lo, hi, idx), chunks))
         if on_view is not None:
