@@ -49,6 +49,21 @@ def add_bench_commands(bsub, add) -> None:
     bv.add_argument("--deadline-s", type=float, default=300.0, help="clients stop retrying after this")
     _quick(bv, uploads=6, renders=5)
 
+    bp = add(bsub, "print-predict", "the print channel's model fitted on moderate captures, and its per-scene "
+                                     "restore predictions against measured restores (writes the model to "
+                                     "budget-curves.json)", _run("snapshot3d.bench.print_predict",
+                                                                 "bench_print_predict_command"))
+    _out(bp)
+    bp.add_argument("--scenes", default="spot-r16c4,spot-r24c4,spot-r32c4,spot-r48c4,lego-print",
+                    help="bench scenes (bench/models/NAME.s3d)")
+    bp.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos")
+    bp.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
+    bp.add_argument("--seeds", type=int, default=3, help="captures per scene and host")
+    bp.add_argument("--draws", type=int, default=2, help="noise draws per host for a prediction")
+    bp.add_argument("--severity", default="moderate", choices=_SEVERITIES, help="capture severity")
+    bp.add_argument("--size", type=int, default=128, help="view size for restore_psnr")
+    _quick(bp, scenes="spot-r16c4,lego-print", hosts="chelsea", heldout=0, seeds=1, draws=1)
+
     bs = add(bsub, "scan", "scanner on simulated photos: detection, corner error, PSNR, speed; charts",
              _run("snapshot3d.bench.scan", "bench_scan_command"))
     _out(bs)

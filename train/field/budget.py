@@ -1,8 +1,15 @@
 """`fit --budget auto --medium M` (DESIGN section 4): fit a ladder of plane sizes and keep the one that gives
-the best `e2e_psnr` expected through medium M: the field's own error (held-out `field_psnr`) plus what the
-medium's codec loses at that payload (its `restore_psnr`, read from the codec bench's curve of payload
-size against restore fidelity, `snapshot3d/assets/budget-curves.json`), added as mean square errors;
-the smallest rung within `tolerance_db` of the best wins.
+the best `e2e_psnr` expected through medium M; the smallest rung within `tolerance_db` of the best wins.
+
+- `print`: each rung's own planes go through the print channel's model (`snapshot3d.print_channel`, its
+  constants measured by `bench print-predict` and kept in `snapshot3d/assets/budget-curves.json`):
+  embedded in each of `PREDICT_HOSTS`, read with the model's gain and noise, restored, and scored
+  against the held-out views (the median over the hosts). The codec's share of the loss depends on the
+  scene's own plane spectrum, which a curve of payload size cannot know (lego's 48x4 restores 4 dB
+  below spot's at the same payload).
+- `file` (and `print` without a channel model): the field's own error (held-out `field_psnr`) plus what
+  the medium's codec loses at that payload (its `restore_psnr`, read from the codec bench's curve of
+  payload size against restore fidelity, `budget-curves.json`), added as mean square errors.
 
 The largest rung is fitted from scratch; each smaller rung starts from the largest planes, area-
 downsampled to its resolution with the leading channels kept (the decoder is trained with nested
@@ -24,9 +31,48 @@ from .config import LADDER, LADDER_PRINT, FitConfig
 from .evaluate import evaluate_planes
 from .fit import fit, hull_grid
 
-__all__ = ["fit_ladder", "choose_rung", "codec_psnr", "expected_e2e", "ladder_for", "CURVES_FILE"]
+__all__ = ["fit_ladder", "choose_rung", "codec_psnr", "expected_e2e", "codec_share", "ladder_for", "print_channel",
+           "predicted_e2e", "CURVES_FILE", "PREDICT_HOSTS"]
 
 CURVES_FILE = "budget-curves.json"
+PREDICT_HOSTS = ("builtin:coffee", "builtin:chelsea")
+
+
+def _curves() -> tuple[dict, object]:
+    import json
+
+    from snapshot3d.paths import asset
+
+    path = asset(CURVES_FILE)
+    return (json.loads(path.read_text()) if path.is_file() else {}), path
+
+
+def print_channel():
+    """The print channel's model (`print_channel.ChannelModel`) from budget-curves.json, or None."""
+    from snapshot3d.print_channel import ChannelModel
+
+    ch = _curves()[0].get("print", {}).get("channel")
+    return ChannelModel(float(ch["gain"]), float(ch["unit"])) if ch else None
+
+
+def predicted_e2e(planes: np.ndarray, decoder, posed: PosedImages, channel, hosts=PREDICT_HOSTS, seed: int = 0) -> float:
+    """The e2e_psnr (held-out views) expected of planes (3, C, R, R) printed and captured: the median over
+    `hosts` of one draw of the channel model each."""
+    from snapshot3d.print_channel import predicted_planes
+    from snapshot3d.scanner.backgrounds import load_host
+    from snapshot3d.scene import quantize_planes
+
+    rng = np.random.default_rng(seed)
+    scores = [evaluate_planes(dequantize_planes(quantize_planes(predicted_planes(load_host(h), planes, channel, rng))),
+                              decoder, posed)["field_psnr"] for h in hosts]
+    return float(np.median(scores))
+
+
+def codec_share(field_psnr: float, e2e_psnr: float) -> float:
+    """The codec's restore_psnr implied by a field's own error and the e2e it ends at (inverse of
+    `expected_e2e`; 99 dB when the codec lost nothing measurable)."""
+    rest = 10 ** (-e2e_psnr / 10) - 10 ** (-field_psnr / 10)
+    return float(min(-10 * np.log10(rest), 99.0)) if rest > 0 else 99.0
 
 
 def ladder_for(medium: str | None):
@@ -37,13 +83,9 @@ def ladder_for(medium: str | None):
 def codec_psnr(medium: str, values: int) -> float:
     """The restore_psnr the medium's codec gives a payload of `values` plane values, interpolated in
     log(values) on the codec bench's curve (clamped to its ends)."""
-    import json
-
     from snapshot3d.errors import UserError
-    from snapshot3d.paths import asset
 
-    path = asset(CURVES_FILE)
-    curves = json.loads(path.read_text()) if path.is_file() else {}
+    curves, path = _curves()
     if medium not in curves:
         raise UserError(f"no codec curve for medium {medium!r} in {path}; run 'snapshot3d bench codec --medium {medium}'")
     pts = sorted(curves[medium]["points"])
@@ -67,8 +109,10 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
                finetune_fraction: float = 0.4, log=print, progress_factory=None, device=None, medium: str | None = None):
     """Returns (chosen rung index, rungs): each rung a dict with plane_res, plane_channels, scene_kb,
     field_psnr, field_ssim, fit_seconds and its `codes`; with a `medium`, also codec_psnr (what its codec
-    gives that payload) and e2e_expected, by which the rung is chosen."""
+    costs this rung) and e2e_expected, by which the rung is chosen (print: predicted from the rung's own
+    planes, the curve's value kept as codec_psnr_curve)."""
     ladder = ladder or ladder_for(medium)
+    channel = print_channel() if medium == "print" else None
     from snapshot3d.scene import Orbit, Scene
     hull = hull_grid(posed)
     rungs, big = [], None
@@ -93,7 +137,12 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
         if medium is not None:
             c = codec_psnr(medium, int(res_.codes.size))
             rungs[-1].update(codec_psnr=round(c, 3), e2e_expected=round(expected_e2e(ev["field_psnr"], c), 3))
+            if channel is not None:  # the scene's own planes through the print channel's model
+                e2e = predicted_e2e(dequantize_planes(res_.codes), decoder, posed, channel)
+                rungs[-1].update(codec_psnr_curve=rungs[-1]["codec_psnr"], e2e_expected=round(e2e, 3),
+                                 codec_psnr=round(codec_share(ev["field_psnr"], e2e), 3))
         log(f"ladder R={res} C={ch}: {kb:.1f} kB, field_psnr {ev['field_psnr']:.2f} dB"
-            + (f", codec ({medium}) {rungs[-1]['codec_psnr']:.2f} dB, e2e expected {rungs[-1]['e2e_expected']:.2f} dB"
+            + (f", codec ({medium}{', this scene' if channel is not None else ''}) {rungs[-1]['codec_psnr']:.2f} dB, "
+               f"e2e expected {rungs[-1]['e2e_expected']:.2f} dB"
                if medium else "") + f", {seconds:.0f} s")
     return choose_rung(rungs, tolerance_db, "e2e_expected" if medium else "field_psnr"), rungs

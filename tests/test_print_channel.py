@@ -1,0 +1,69 @@
+"""The print channel's model (`snapshot3d.print_channel`): measured from a real simulated capture, it
+predicts that capture's plane error; its limits behave (no noise: the digital restore; more noise: worse);
+the ladder's codec share inverts the e2e sum; the shipped constants are sane."""
+import numpy as np
+import pytest
+
+from snapshot3d import formats
+from snapshot3d import print_layout as pl
+from snapshot3d.paths import asset
+from snapshot3d.print_channel import ChannelModel, measure, predicted_planes
+from snapshot3d.scanner.backgrounds import load_host
+from snapshot3d.scanner.qr import scene_meta
+from snapshot3d.scene import load_scene_file
+from snapshot3d.train.field.budget import codec_share, expected_e2e, print_channel
+
+
+def _rmse(a, b):
+    return float(np.sqrt(np.mean((a - b) ** 2)))
+
+
+@pytest.fixture(scope="module")
+def captured():
+    import cv2
+
+    from snapshot3d.scanner.scan import scan_image
+    from snapshot3d.scanner.sheet import render_sheet
+    from snapshot3d.scanner.simulate import simulate
+
+    scene = load_scene_file(asset("spot-print.s3d"))
+    host = load_host("builtin:chelsea")
+    snap = pl.embed(host, scene.planes())
+    data, _, _ = simulate(render_sheet(snap, scene_meta(scene, formats.PRINT_CODEC), 4), "moderate", 1)
+    cap = scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+    return scene, host, snap, cap
+
+
+def test_model_measured_on_a_capture_predicts_its_error(captured):
+    scene, host, snap, cap = captured
+    r, c = scene.resolution, scene.channels
+    ch = measure(snap, cap, r, c)
+    assert 0.1 < ch.gain < 2 and ch.unit > 0
+    truth = scene.planes()
+    measured = _rmse(pl.restore(*pl.despread(cap, r, c), r, c)[0], truth)
+    rng = np.random.default_rng(0)
+    predicted = np.median([_rmse(predicted_planes(host, truth, ch, rng), truth) for _ in range(4)])
+    assert predicted == pytest.approx(measured, rel=0.25), (predicted, measured)
+
+
+def test_model_limits(captured):
+    scene, host, _, _ = captured
+    r, c = scene.resolution, scene.channels
+    truth, rng = scene.planes(), np.random.default_rng(1)
+    digital = _rmse(pl.restore(*pl.despread(pl.embed(host, truth), r, c), r, c)[0], truth)
+    clean = _rmse(predicted_planes(host, truth, ChannelModel(1.0, 1e-12), rng), truth)
+    assert clean == pytest.approx(digital, rel=0.02)
+    errors = [_rmse(predicted_planes(host, truth, ChannelModel(0.5, u), rng), truth) for u in (1.0, 10.0, 100.0)]
+    assert errors[0] < errors[1] < errors[2]
+
+
+def test_codec_share_inverts_the_e2e_sum():
+    for field, codec in ((30.0, 25.0), (27.6, 26.0), (35.0, 18.0)):
+        assert codec_share(field, expected_e2e(field, codec)) == pytest.approx(codec, abs=1e-6)
+    assert codec_share(30.0, 30.0) == 99.0
+
+
+def test_shipped_channel_constants():
+    ch = print_channel()
+    assert ch is not None, "budget-curves.json has no print channel: run 'snapshot3d bench print-predict'"
+    assert 0.1 < ch.gain < 2 and 0.1 < ch.unit < 1000
