@@ -55,10 +55,10 @@ def bench_print_predict_command(args) -> int:
     hosts = {h: load_host("builtin:" + h) for h in args.hosts.split(",") if h}
     hosts.update({Path(p).stem: load_host(p) for p in heldout_hosts(args.heldout)})
     scenes = {s: load_scene_file(MODELS / f"{s}.s3d") for s in args.scenes.split(",")}
-    rows = []
+    rows, judges = [], {}
     with bench_progress(len(scenes) * len(hosts) * args.seeds, "captures") as bar:
         for sname, scene in scenes.items():
-            judge = ViewJudge(scene, args.size)
+            judge = judges[sname] = ViewJudge(scene, args.size)  # renders the reference views once per scene
             r, c = scene.resolution, scene.channels
             for hname, host in hosts.items():
                 snap = embed(host, scene.planes())
@@ -76,7 +76,7 @@ def bench_print_predict_command(args) -> int:
     rng = np.random.default_rng(0)
     summary = {}
     for sname, scene in scenes.items():
-        judge = ViewJudge(scene, args.size)
+        judge = judges[sname]
         pred = [judge.planes_psnr(predicted_planes(host, scene.planes(), channel, rng))
                 for host in hosts.values() for _ in range(args.draws)]
         rows += [{"kind": "predicted", "scene": sname, "values": scene.codes.size, "restore_psnr": p} for p in pred]

@@ -216,3 +216,17 @@ def test_openapi_and_page(decoded):
     assert page.status_code == 200 and 'capture="environment"' in page.text
     for js in ("app.js", "gl.js", "grid.js", "style.css"):
         assert client.get(f"/static/{js}").status_code == 200, js
+
+
+def test_serve_command_refuses_a_bad_cache_or_a_busy_port(tmp_path):
+    import socket
+
+    from helpers import assert_one_line_error, run_cli
+    (tmp_path / "file").write_text("x")
+    assert_one_line_error(run_cli("serve", "--cache", str(tmp_path / "file"), timeout=60), "scene cache")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        assert_one_line_error(run_cli("serve", "--port", str(port), "--cache", str(tmp_path / "c"), timeout=60),
+                              "cannot listen")

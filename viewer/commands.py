@@ -128,6 +128,16 @@ def serve_command(args) -> int:
     cfg = config_from_args(ServeConfig, args)
     if not 1 <= cfg.max_decodes <= 64 or cfg.timeout_s <= 0 or cfg.max_scenes < 1:
         raise UserError("--max-decodes must be in 1..64, --timeout-s > 0 and --max-scenes >= 1")
+    try:
+        cfg.cache_dir().mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"cannot use {cfg.cache_dir()} as the scene cache ({e.strerror}); pass --cache FOLDER") from None
+    import socket
+    with socket.socket() as probe:  # a port in use is a user's mistake: say so before starting
+        try:
+            probe.bind((cfg.host, cfg.port))
+        except OSError as e:
+            raise UserError(f"cannot listen on {cfg.host}:{cfg.port} ({e.strerror}); pass another --port") from None
     app = create_app(cfg)
     print(f"snapshot3d serve: open http://{cfg.host}:{cfg.port}/ (API docs at /docs); scenes in {cfg.cache_dir()}")
     uvicorn.run(app, host=cfg.host, port=cfg.port, log_level="warning")

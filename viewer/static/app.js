@@ -153,7 +153,12 @@
     }
   }
 
-  function hasWebGL2() { return !!document.createElement("canvas").getContext("webgl2"); }
+  // asked once: every getContext on a fresh canvas makes a WebGL context, and browsers keep only a few
+  let webgl2 = null;
+  function hasWebGL2() {
+    if (webgl2 === null) webgl2 = !!document.createElement("canvas").getContext("webgl2");
+    return webgl2;
+  }
 
   $("photo").addEventListener("change", (e) => { if (e.target.files[0]) decode(e.target.files[0]); });
   // drop a photo or a snapshot file anywhere on the page

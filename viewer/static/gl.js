@@ -102,6 +102,7 @@ const S3DGL = (() => {
   function create(canvas, grid) {
     const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
     if (!gl) return null;
+    if (canvas.s3dDispose) canvas.s3dDispose();  // the previous scene's program and textures on this canvas
     const prog = gl.createProgram();
     gl.attachShader(prog, compile(gl, gl.VERTEX_SHADER, VERT));
     gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, FRAG));
@@ -150,6 +151,10 @@ const S3DGL = (() => {
       gl.bindVertexArray(vao);
       gl.drawArrays(gl.TRIANGLES, 0, 3);
     }
+    canvas.s3dDispose = () => {
+      gl.deleteTexture(tex); gl.deleteTexture(occ); gl.deleteProgram(prog); gl.deleteVertexArray(vao);
+      canvas.s3dDispose = null;
+    };
     return { draw, gl };
   }
 
