@@ -274,7 +274,7 @@ def write_codec_chart(rows: list[dict], path: Path, cores: int) -> None:
 
 _DEFAULTS = {"file": {"scenes": "snapshot3d/assets/spot.s3d,cache/scenes/lego.s3d", "seeds": 3,
                       "strengths": "0.5,0.75,1,1.5,2"},
-             "print": {"scenes": "bench/models/spot-print.s3d,bench/models/lego-print.s3d", "seeds": 6,
+             "print": {"scenes": "bench/models/spot-print.s3d,bench/models/lego-print-auto.s3d", "seeds": 6,
                        "strengths": "0.5,0.71,1,1.41,2"}}
 
 

@@ -31,6 +31,14 @@ def _resolved(args, settings: dict):
     return args
 
 
+def _scene_sweep(p, scenes: str, scenes_help: str, hosts_help: str) -> None:
+    """The options of a bench over scenes x hosts x simulated photos: --scenes, --hosts, --seeds, --size."""
+    p.add_argument("--scenes", default=scenes, help=scenes_help)
+    p.add_argument("--hosts", default="coffee,chelsea", help=hosts_help)
+    p.add_argument("--seeds", type=int, default=3, help="simulated photos per physical severity")
+    p.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
+
+
 def add_bench_commands(bsub, add) -> None:
     """Add every benchmark to the `bench` subparsers `bsub`; `add(sub, name, help, func)` makes a parser."""
     bf = add(bsub, "fit", "field_psnr against scene_kb and fit time, spot and lego; training throughput",
@@ -80,6 +88,17 @@ def add_bench_commands(bsub, add) -> None:
     bh.add_argument("--severities", default="jpeg75,mild,moderate,severe", help="comma-separated severities")
     _quick(bh, seeds=1)
 
+    bg = add(bsub, "print-digital", "the print medium's digital payload candidate (quantised planes, CRC, "
+                                     "convolutional code, nested layers) against the analog carriers on the same "
+                                     "captures, and what an ideal code could carry",
+             _run("snapshot3d.bench.print_digital", "bench_print_digital_command"))
+    _out(bg)
+    _scene_sweep(bg, "bench/models/spot-print.s3d,bench/models/lego-print-auto.s3d",
+                 "comma-separated scene files (the print ladder's choices)", "bundled host photos")
+    bg.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
+    bg.add_argument("--severities", default="none,jpeg75,mild,moderate,severe", help="comma-separated severities")
+    _quick(bg, scenes="bench/models/spot-print.s3d", hosts="chelsea", heldout=0, seeds=1, severities="none,moderate")
+
     bc = add(bsub, "codec", "a medium's codec: host fidelity vs restore_psnr through simulate+scan; baselines; "
                             "charts (codec.* for the file medium, codec_print.* for the print medium)",
              _run("snapshot3d.bench.codec", "bench_codec_command"))
@@ -88,7 +107,7 @@ def add_bench_commands(bsub, add) -> None:
     bc.add_argument("--scenes", default=None,
                     help="comma-separated scene files to evaluate (spot is never trained on; default: file "
                          "snapshot3d/assets/spot.s3d,cache/scenes/lego.s3d; print bench/models/spot-print.s3d,"
-                         "bench/models/lego-print.s3d)")
+                         "bench/models/lego-print-auto.s3d, the print ladder's choices)")
     bc.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from training)")
     bc.add_argument("--headline", default="spot,lego", help="scenes (file stems) the summary's medians are over")
     bc.add_argument("--seeds", type=int, default=None, help="simulated photos per physical severity (default: file 3, "
@@ -133,11 +152,9 @@ def add_bench_commands(bsub, add) -> None:
                                "it allows, beside the shipped codec's, per plane size",
              _run("snapshot3d.bench.capacity", "bench_capacity_command"))
     _out(bq)
-    bq.add_argument("--scenes", default="snapshot3d/assets/spot.s3d,bench/models/spot-r48c4.s3d,bench/models/spot-r32c4.s3d",
-                    help="comma-separated scene files (spot fitted at several plane sizes)")
-    bq.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from training)")
-    bq.add_argument("--seeds", type=int, default=3, help="simulated photos per physical severity")
-    bq.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
+    _scene_sweep(bq, "snapshot3d/assets/spot.s3d,bench/models/spot-r48c4.s3d,bench/models/spot-r32c4.s3d",
+                 "comma-separated scene files (spot fitted at several plane sizes)",
+                 "bundled host photos (held out from training)")
     _quick(bq, scenes="snapshot3d/assets/spot.s3d", hosts="coffee", seeds=1, size=48)
 
     bd = add(bsub, "decode", "torch-free decode of simulated photos: decode_ms per stage, restore_psnr, e2e_psnr; "

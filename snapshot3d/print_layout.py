@@ -30,7 +30,8 @@ import numpy as np
 
 from . import bands, formats
 
-__all__ = ["PrintLayout", "print_layout", "prior_spectrum", "allocate", "embed", "despread", "restore",
+__all__ = ["PrintLayout", "print_layout", "prior_spectrum", "allocate", "embed", "embed_values", "despread",
+           "read_carriers", "carrier_chips", "restore",
            "Reading", "PRINT_BANDS", "DESIGN_NOISE", "PAYLOAD_RMS", "PILOTS", "HOST_PSNR", "READ_NOISE", "cancel_share",
            "check_print_planes", "random_planes", "noise_map", "band_noise", "PRINT_NOISE"]
 
@@ -163,6 +164,18 @@ def noise_map(image: np.ndarray) -> np.ndarray:
     return np.concatenate([per[b].ravel() for b in PRINT_BANDS])
 
 
+def carrier_chips(count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """`count` disjoint carriers over the pool of `PRINT_BANDS`, as many chips each as fit: chips (count, K)
+    int indices into the pool and their entries (count, K) (a random sign times the square root of the
+    band's weight)."""
+    pool_w = _pool_weights()
+    k = len(pool_w) // count
+    if k < 1:
+        raise ValueError(f"{count} carriers do not fit the snapshot's {len(pool_w)} coefficients")
+    chips = rng.permutation(len(pool_w))[:count * k].reshape(count, k)
+    return chips, rng.choice([-1.0, 1.0], size=chips.shape) * np.sqrt(pool_w[chips])
+
+
 @lru_cache(maxsize=8)
 def print_layout(res: int, channels: int) -> PrintLayout:
     """The carriers of (3, channels, res, res) planes (deterministic: both sides build the same)."""
@@ -173,13 +186,7 @@ def print_layout(res: int, channels: int) -> PrintLayout:
     power = allocate(lam, total * (1 - _PILOT_SHARE), DESIGN_NOISE)
     active = np.flatnonzero(power > 1e-9 * total)
     rng = np.random.default_rng(_SEED + 1000 * res + channels)
-    pool_w = _pool_weights()
-    count = PILOTS + len(active)
-    k = len(pool_w) // count
-    if k < 1:
-        raise ValueError(f"{count} carriers do not fit the snapshot's {len(pool_w)} coefficients")
-    chips = rng.permutation(len(pool_w))[:count * k].reshape(count, k)
-    w = rng.choice([-1.0, 1.0], size=chips.shape) * np.sqrt(pool_w[chips])
+    chips, w = carrier_chips(PILOTS + len(active), rng)
     pilot_amp = float(np.sqrt(total * _PILOT_SHARE / PILOTS))
     return PrintLayout(res, channels, chips, w, active, np.sqrt(power[active] / lam[active]), lam[active],
                        pilot_amp, rng.choice([-1.0, 1.0], size=PILOTS))
@@ -231,12 +238,26 @@ def embed(host: np.ndarray, planes: np.ndarray, host_psnr: float = HOST_PSNR, ro
     `cancel` of it is cancelled (None: `cancel_share` decides for this host), and clipping and rounding
     are corrected by `rounds` projections. `with_payload`: also the payload pattern alone (380, 380, 3)
     float32, the carriers times their values with no host (what the restore front-end learns to find)."""
-    n = formats.SNAPSHOT_SIZE
-    if host.shape != (n, n, 3):
-        raise ValueError(f"host must be ({n}, {n}, 3) RGB, got {host.shape}")
     _, c, r, _ = planes.shape
     lay = print_layout(r, c)
     unit = carrier_values(lay, planes)
+    snap, scaled = embed_values(host, lay, unit, host_psnr, rounds, cancel)
+    if not with_payload:
+        return snap
+    w, _ = _filters(lay, snap / 255.0)
+    coeffs = {b: np.zeros_like(v) for b, v in bands.analyse(snap / 255.0).items()}
+    vec = _flat(coeffs)
+    vec[lay.chips] = w * scaled[:, None]
+    return snap, bands.synthesise(_unflat(vec, coeffs)).astype(np.float32)
+
+
+def embed_values(host: np.ndarray, lay: PrintLayout, unit: np.ndarray, host_psnr: float = HOST_PSNR,
+                 rounds: int = 4, cancel: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Any carrier values (N,) (pilots first) written into host (380, 380, 3) float RGB in [0, 1] at
+    `host_psnr` dB (see `embed`): the snapshot (380, 380, 3) uint8 RGB and the values as scaled (N,)."""
+    n = formats.SNAPSHOT_SIZE
+    if host.shape != (n, n, 3):
+        raise ValueError(f"host must be ({n}, {n}, 3) RGB, got {host.shape}")
     host = np.asarray(host, np.float64)
     cancel = cancel_share(host, lay, host_psnr) if cancel is None else cancel
     host8 = np.round(np.clip(host, 0, 1) * 255.0) / 255.0
@@ -251,14 +272,7 @@ def embed(host: np.ndarray, planes: np.ndarray, host_psnr: float = HOST_PSNR, ro
         snap = _embed_scaled(lay, host, unit * scale, rounds, cancel)
         mse = float(np.mean((snap / 255.0 - host8) ** 2))
         scale *= np.sqrt((want - base) / max(mse - base, 1e-12))
-    snap = _embed_scaled(lay, host, unit * scale, rounds, cancel)
-    if not with_payload:
-        return snap
-    w, _ = _filters(lay, snap / 255.0)
-    coeffs = {b: np.zeros_like(v) for b, v in bands.analyse(snap / 255.0).items()}
-    vec = _flat(coeffs)
-    vec[lay.chips] = w * (unit * scale)[:, None]
-    return snap, bands.synthesise(_unflat(vec, coeffs)).astype(np.float32)
+    return _embed_scaled(lay, host, unit * scale, rounds, cancel), unit * scale
 
 
 def _embed_scaled(lay: PrintLayout, host: np.ndarray, target: np.ndarray, rounds: int, cancel: float) -> np.ndarray:
@@ -287,6 +301,13 @@ def _filters(lay: PrintLayout, img: np.ndarray):
 
 def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | None = None,
              weighted: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """What each carrier of (3, channels, res, res) planes reads in an image: `read_carriers` of their
+    layout."""
+    return read_carriers(image, print_layout(res, channels), capture, weighted)
+
+
+def read_carriers(image: np.ndarray, lay: PrintLayout, capture: np.ndarray | None = None,
+                  weighted: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """What each carrier reads in an image (380, 380, 3) (uint8, or float in [0, 1]): the readings (N,)
     and each reading's relative noise power (N,). The carriers' shapes follow the brightness of
     `capture` (default: the image itself; give the capture when `image` is the front-end's payload
@@ -294,7 +315,6 @@ def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | N
     darks), for a raw capture; else matched to the carriers only (the front-end has weighed the places)."""
     img = image.astype(np.float64) / 255.0 if image.dtype == np.uint8 else np.asarray(image, np.float64)
     cap = img if capture is None else (capture / 255.0 if capture.dtype == np.uint8 else capture)
-    lay = print_layout(res, channels)
     w, q = _filters(lay, cap)
     noise = noise_map(cap)[lay.chips]
     if not weighted:

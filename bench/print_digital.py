@@ -1,0 +1,124 @@
+"""`snapshot3d bench print-digital`: the digital payload (`bench.digital_payload`: quantised planes, CRC,
+convolutional code, nested layers) against the shipped analog carriers (`print-1`) on the same scenes,
+hosts, severities and seeds, each through the real channel (sheet -> `simulate` -> `scan`).
+
+Rows (print_digital.csv), per scene, host, severity and seed:
+- `print`: the shipped codec: `restore_psnr` (views at --size against the scene's own) and plane RMSE;
+- `digital`: the candidate: layers whose CRC held, stream bits restored, the data carriers' SNR by the
+  pilots, `restore_psnr` and plane RMSE;
+- `digital-ideal`: what any code on the same carriers could do in that capture: the BPSK mutual information
+  of its soft values (bits) and the best `restore_psnr` that many bits allow for the scene's planes (the
+  Gaussian separation bound of `bench capacity`, rendered through the scene's noise curve).
+Writes print_digital.{csv,json,png} under --out."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from snapshot3d import formats
+from snapshot3d.print_layout import embed
+from snapshot3d.scanner.backgrounds import load_host
+from snapshot3d.scanner.qr import scene_meta
+from snapshot3d.scene import load_scene_file
+from snapshot3d.viewer.media import restore_print
+
+from .codec_print import heldout_hosts
+from .common import SEVERITIES, ViewJudge, bench_progress, capture_seeds, median, pyplot, through_channel, write_report
+from .digital_payload import DESIGN, embed_digital, layer_sizes, read_digital, sent_bits
+
+__all__ = ["bench_print_digital_command"]
+
+METHODS = ("print", "digital", "digital-ideal")
+
+
+def _ideal_psnr(judge: ViewJudge, curve, bits: float, planes: np.ndarray) -> float:
+    from snapshot3d.train.codec.capacity import best_plane_rmse
+
+    from .capacity import psnr_at
+    return psnr_at(curve, best_plane_rmse(bits, planes.size, float(np.var(planes))))
+
+
+def _scene_rows(sname, scene, hosts, severities, seeds, size, bar) -> list[dict]:
+    from .capacity import noise_curve
+
+    judge = ViewJudge(scene, size)
+    curve = noise_curve(judge)
+    planes, r, c = scene.planes(), scene.resolution, scene.channels
+    meta = scene_meta(scene, formats.PRINT_CODEC)
+    sent = sent_bits(planes)
+    rows = []
+    for hname, host in hosts.items():
+        snaps = {"print": embed(host, planes), "digital": embed_digital(host, planes)}
+        for sev in severities:
+            for seed in capture_seeds(sev, seeds):
+                for method, snap in snaps.items():
+                    cap = through_channel(snap, meta, sev, seed)
+                    base = {"scene": sname, "host": hname, "severity": sev, "seed": seed, "detected": int(cap is not None)}
+                    if cap is None:
+                        rows.append(dict(base, method=method))
+                        continue
+                    if method == "print":
+                        got = restore_print(cap, r, c)[0]
+                        rows.append(dict(base, method=method, restore_psnr=judge.planes_psnr(got),
+                                         plane_rmse=float(np.sqrt(np.mean((got - planes) ** 2)))))
+                        continue
+                    got, rd = read_digital(cap, r, c, sent=sent)
+                    info = {"layers": rd.layers, "bits": rd.bits, "snr_db": rd.snr_db, "mutual_info_bits": rd.mutual_info_bits}
+                    rows.append(dict(base, method="digital", restore_psnr=judge.planes_psnr(got),
+                                     plane_rmse=float(np.sqrt(np.mean((got - planes) ** 2))), **info))
+                    rows.append(dict(base, method="digital-ideal", **info,
+                                     restore_psnr=_ideal_psnr(judge, curve, rd.mutual_info_bits, planes)))
+                bar.update(1)
+    return rows
+
+
+def bench_print_digital_command(args) -> int:
+    out = Path(args.out)
+    t0 = time.time()
+    hosts = {h: load_host("builtin:" + h) for h in args.hosts.split(",") if h}
+    hosts.update({Path(p).stem: load_host(p) for p in heldout_hosts(args.heldout)})
+    scenes = {Path(p).stem: load_scene_file(p) for p in args.scenes.split(",")}
+    severities = [s for s in args.severities.split(",") if s]
+    per = sum(len(capture_seeds(s, args.seeds)) for s in severities)
+    rows = []
+    with bench_progress(len(scenes) * len(hosts) * per, "captures") as bar:
+        for sname, scene in scenes.items():
+            rows += _scene_rows(sname, scene, hosts, severities, args.seeds, args.size, bar)
+    summary = {m: {s: {k: median([r for r in rows if r["method"] == m and r["severity"] == s], k)
+                       for k in ("restore_psnr", "plane_rmse", "bits", "mutual_info_bits", "snr_db", "layers")}
+                   for s in severities} for m in METHODS}
+    by_scene = {n: {m: {s: median([r for r in rows if r["scene"] == n and r["method"] == m and r["severity"] == s],
+                                  "restore_psnr") for s in severities} for m in METHODS} for n in scenes}
+    doc = write_report(out, "print_digital", rows, {
+        "scenes": list(scenes), "hosts": list(hosts), "seeds": args.seeds, "view_size": args.size,
+        "design": {"data_carriers": DESIGN.carriers, "layers": [
+            {"carriers": n, "repetitions": rep, "info_bits": info} for n, rep, info in layer_sizes(DESIGN)]},
+        "summary": summary, "by_scene": by_scene, "seconds": round(time.time() - t0, 1)})
+    _chart(out / "print_digital.png", doc, severities)
+    for m in METHODS:
+        print(m, {s: round(v["restore_psnr"], 2) for s, v in summary[m].items() if v["restore_psnr"] is not None})
+    return 0
+
+
+def _chart(path: Path, doc: dict, severities: list[str]) -> None:
+    plt = pyplot()
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.5))
+    x = np.arange(len(severities))
+    for m in METHODS:
+        ax[0].plot(x, [doc["summary"][m][s]["restore_psnr"] or np.nan for s in severities], "o-", label=m)
+    ax[0].set_xticks(x, severities)
+    ax[0].set(ylabel="restore_psnr (dB), median", title="analog carriers (print) against a digital payload")
+    ax[0].legend(fontsize=8)
+    for key, label in (("mutual_info_bits", "ideal code on these carriers (mutual information)"),
+                       ("bits", "delivered by CRC + conv. code + layers")):
+        ax[1].plot(x, [doc["summary"]["digital"][s][key] or np.nan for s in severities], "o-", label=label)
+    ax[1].set_xticks(x, severities)
+    ax[1].set_yscale("log")
+    ax[1].set(ylabel="payload bits per capture, median", title="what the carriers could carry and what was carried")
+    ax[1].legend(fontsize=8)
+    fig.suptitle(f"snapshot3d bench print-digital ({', '.join(doc['scenes'])}; {doc['cores']} cores)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
