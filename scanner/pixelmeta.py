@@ -7,8 +7,10 @@ The mark: a fixed 72-byte frame (format byte, codec id, the fields, CRC-32), con
 fixed permutation; a slot is one low-frequency DCT coefficient ((0,1), (1,0), (1,1)) of the luma of one 8x8
 block (the JPEG grid at the snapshot's origin), written by dither-modulation QIM with step `STEP`.
 Coefficients at those frequencies survive JPEG quality 60 (its step there is about 10, under `STEP`/2) and
-resizing; the reader sums soft decisions over the repetitions, decodes them with the Viterbi algorithm
-and accepts the frame only when its CRC holds, so a damaged mark is refused, never misread. The writer marks the host before the
+resizing; the step was raised from 24 to 40 when a 256-px JPEG-75 copy of a textured host lost the mark
+(README "Metadata in the pixels"), and marks of the old step (`LEGACY_STEPS`) are still read. The reader
+sums soft decisions over the repetitions, decodes them with the Viterbi algorithm and accepts the frame
+only when its CRC holds, so a damaged mark is refused, never misread. The writer marks the host before the
 codec embeds the planes (the codec's residual is noise to the mark, not the other way round).
 
 Reading a copy: a square of another size is resized to the snapshot's; an image within `MAX_SHIFT` pixels
@@ -29,10 +31,11 @@ from snapshot3d import formats
 
 from .qr import SheetMeta
 
-__all__ = ["FRAME_BYTES", "STEP", "REPEAT", "MAX_SHIFT", "pack", "unpack", "mark", "read_at", "find_meta"]
+__all__ = ["FRAME_BYTES", "STEP", "LEGACY_STEPS", "REPEAT", "MAX_SHIFT", "pack", "unpack", "mark", "read_at", "find_meta"]
 
 FRAME_BYTES = 72   # the whole frame (fields, padding, CRC-32)
-STEP = 24.0        # QIM step on an orthonormal 8x8 DCT coefficient of luma (0-255 scale)
+STEP = 40.0        # QIM step on an orthonormal 8x8 DCT coefficient of luma (0-255 scale)
+LEGACY_STEPS = (24.0,)   # steps of marks written by earlier versions, still read (never written)
 BLOCK = 8
 COEFS = ((0, 1), (1, 0), (1, 1))   # (row, column) frequencies written in every block
 MAX_SHIFT = 8      # crop or padding searched, in pixels, on each axis
@@ -85,15 +88,16 @@ def unpack(frame: bytes) -> SheetMeta | None:
         return None
 
 
-@lru_cache(maxsize=1)
-def _code() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(basis (3, 8, 8) orthonormal DCT, slot of each (coded bit, repeat) (_CODED, REPEAT), dither per slot)."""
+@lru_cache(maxsize=4)
+def _code(step: float = STEP) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(basis (3, 8, 8) orthonormal DCT, slot of each (coded bit, repeat) (_CODED, REPEAT), dither per slot
+    for a QIM step)."""
     k = np.arange(BLOCK)
     c = np.sqrt(np.where(k == 0, 1.0, 2.0) / BLOCK)[:, None] * np.cos((2 * k[None] + 1) * k[:, None] * np.pi / 16)
     basis = np.stack([np.outer(c[u], c[v]) for u, v in COEFS])
     rng = np.random.default_rng(_SEED)
     slots = rng.permutation(_N * _N * len(COEFS))[:_CODED * REPEAT].reshape(_CODED, REPEAT)
-    dither = rng.uniform(0, STEP, _N * _N * len(COEFS))
+    dither = rng.uniform(0, step, _N * _N * len(COEFS))
     return basis, slots, dither
 
 
@@ -155,17 +159,18 @@ def _coefs(luma: np.ndarray) -> np.ndarray:
     return np.einsum("iyjx,kyx->ijk", blocks, basis).reshape(-1)
 
 
-def mark(rgb: np.ndarray, meta: SheetMeta) -> np.ndarray:
-    """(380, 380, 3) uint8 RGB with the metadata written into its luma (the same change on R, G and B)."""
-    basis, slots, dither = _code()
+def mark(rgb: np.ndarray, meta: SheetMeta, step: float = STEP) -> np.ndarray:
+    """(380, 380, 3) uint8 RGB with the metadata written into its luma (the same change on R, G and B);
+    `step` other than STEP only to test that old marks still read."""
+    basis, slots, dither = _code(step)
     bits = conv_encode(np.unpackbits(np.frombuffer(pack(meta), np.uint8)))
     want = np.zeros(dither.shape)
-    want[slots.reshape(-1)] = np.repeat(bits, REPEAT) * STEP / 2
+    want[slots.reshape(-1)] = np.repeat(bits, REPEAT) * step / 2
     out = rgb.astype(np.float64)
     for _ in range(3):  # clipping at black and white undoes part of a change: write again what it undid
         c = _coefs(_luma(np.clip(out, 0, 255).round()))
         offset = want + dither
-        target = np.round((c - offset) / STEP) * STEP + offset
+        target = np.round((c - offset) / step) * step + offset
         delta = np.zeros(c.shape)
         delta[slots.reshape(-1)] = (target - c)[slots.reshape(-1)]
         change = np.einsum("ijk,kyx->iyjx", delta.reshape(_N, _N, len(COEFS)), basis)
@@ -173,15 +178,21 @@ def mark(rgb: np.ndarray, meta: SheetMeta) -> np.ndarray:
     return np.clip(out, 0, 255).round().astype(np.uint8)
 
 
-def _soft(coefs: np.ndarray) -> np.ndarray:
+def _soft(coefs: np.ndarray, step: float = STEP) -> np.ndarray:
     """(_CODED,) soft values (> 0: a coded 0) from the (47*47*3,) marked coefficients."""
-    _, slots, dither = _code()
-    return np.cos(2 * np.pi * (coefs - dither) / STEP)[slots].sum(axis=1)
+    _, slots, dither = _code(step)
+    return np.cos(2 * np.pi * (coefs - dither) / step)[slots].sum(axis=1)
 
 
 def read_at(luma: np.ndarray) -> SheetMeta | None:
-    """The metadata marked in (H>=376, W>=376) luma whose top-left is the snapshot's, or None."""
-    return unpack(np.packbits(viterbi(_soft(_coefs(luma)))).tobytes())
+    """The metadata marked in (H>=376, W>=376) luma whose top-left is the snapshot's (at the current step,
+    then the legacy ones), or None."""
+    coefs = _coefs(luma)
+    for step in (STEP, *LEGACY_STEPS):
+        meta = unpack(np.packbits(viterbi(_soft(coefs, step))).tobytes())
+        if meta is not None:
+            return meta
+    return None
 
 
 def find_meta(rgb: np.ndarray, tries: int = 6) -> tuple[SheetMeta, np.ndarray] | None:
@@ -206,16 +217,17 @@ def find_meta(rgb: np.ndarray, tries: int = 6) -> tuple[SheetMeta, np.ndarray] |
     maps = [cv2.filter2D(luma, cv2.CV_32F, b.astype(np.float32), anchor=(0, 0), borderType=cv2.BORDER_REFLECT_101)
             for b in _code()[0]]                          # (H, W) each: the coefficient of the block at (y, x)
     span = _N * BLOCK
-    scored = []
-    for dy in range(-m, m + 1):
-        for dx in range(-m, m + 1):
-            # the snapshot's pixel (y, x) sits at the copy's (y + dy, x + dx), i.e. padded (y + dy + m, x + dx + m)
-            y0, x0 = dy + m, dx + m
-            coefs = np.stack([c[y0:y0 + span:BLOCK, x0:x0 + span:BLOCK] for c in maps], axis=-1).reshape(-1)
-            soft = _soft(coefs.astype(np.float64))
-            scored.append((-float(np.mean(np.abs(soft))), abs(dy) + abs(dx), y0, x0, soft))
-    for _, _, y0, x0, soft in sorted(scored, key=lambda t: t[:2])[:tries]:
-        meta = unpack(np.packbits(viterbi(soft)).tobytes())
-        if meta is not None:
-            return meta, np.ascontiguousarray(padded[y0:y0 + n, x0:x0 + n])
+    for step in (STEP, *LEGACY_STEPS):
+        scored = []
+        for dy in range(-m, m + 1):
+            for dx in range(-m, m + 1):
+                # the snapshot's pixel (y, x) sits at the copy's (y + dy, x + dx), i.e. padded (y + dy + m, x + dx + m)
+                y0, x0 = dy + m, dx + m
+                coefs = np.stack([c[y0:y0 + span:BLOCK, x0:x0 + span:BLOCK] for c in maps], axis=-1).reshape(-1)
+                soft = _soft(coefs.astype(np.float64), step)
+                scored.append((-float(np.mean(np.abs(soft))), abs(dy) + abs(dx), y0, x0, soft))
+        for _, _, y0, x0, soft in sorted(scored, key=lambda t: t[:2])[:tries]:
+            meta = unpack(np.packbits(viterbi(soft)).tobytes())
+            if meta is not None:
+                return meta, np.ascontiguousarray(padded[y0:y0 + n, x0:x0 + n])
     return None

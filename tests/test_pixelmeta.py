@@ -39,7 +39,7 @@ def _host(name):
 
 @pytest.fixture(scope="module")
 def marked():
-    return {h: pm.mark(_host(h), META) for h in ("coffee", "camera")}
+    return {h: pm.mark(_host(h), META) for h in ("coffee", "camera", "astronaut")}
 
 
 def test_frame_round_trip_and_crc():
@@ -66,7 +66,7 @@ def test_viterbi_corrects_scattered_errors(rng):
 def test_mark_is_faint(marked):
     for h, img in marked.items():
         mse = np.mean((img.astype(float) - _host(h)) ** 2)
-        assert 10 * np.log10(255 ** 2 / mse) >= 44.0   # 44.6-45.1 dB measured
+        assert 10 * np.log10(255 ** 2 / mse) >= 40.0   # 40.6-40.8 dB measured at step 40 (44.6-45.1 at step 24)
 
 
 @pytest.mark.parametrize("name,copy", [
@@ -89,6 +89,13 @@ def test_mark_survives_sharing(marked, name, copy):
         if name.startswith(("crop", "pad")):  # realigned to the snapshot's grid, not just read
             err = np.abs(aligned[8:-8, 8:-8].astype(float) - img[8:-8, 8:-8]).mean()
             assert err < 3.0, (name, err)
+
+
+def test_mark_of_the_old_step_still_reads():
+    old = pm.mark(_host("chelsea"), META, step=pm.LEGACY_STEPS[0])
+    for copy in (lambda x: x, lambda x: _jpeg(x, 75), lambda x: _jpeg(np.ascontiguousarray(x[3:, 2:]), 90)):
+        found = pm.find_meta(copy(old))
+        assert found is not None and found[0] == META
 
 
 def test_no_mark_reads_nothing(rng):
