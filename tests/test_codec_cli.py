@@ -30,7 +30,9 @@ JPEG75_SHORTFALL = pytest.mark.xfail(strict=True, reason="issue 4 shortfall: the
 
 
 @pytest.mark.parametrize("ext,quality,min_host,min_planes", [
-    (".png", 95, 32.0, 28.0),  # --refine 20: measured 29.9 dB (31.5 at the default 100, 22.8 unrefined)
+    # --refine 20: planes measured 29.9 dB (31.5 at the default 100, 22.8 unrefined); host 31.8 dB since the
+    # pixel mark's step went from 24 to 40 (issue 15), which costs file snapshots about 0.4 dB of host PSNR
+    (".png", 95, 31.5, 28.0),
     pytest.param(".jpg", 75, 32.0, 24.0, marks=[JPEG75_SHORTFALL, pytest.mark.slow]),  # 90 s to show a known gap
 ])
 def test_embed_restore_round_trip(tmp_path, ext, quality, min_host, min_planes):
@@ -40,7 +42,7 @@ def test_embed_restore_round_trip(tmp_path, ext, quality, min_host, min_planes):
                "--jpeg-quality", str(quality), "--report", str(tmp_path / "e.json"))
     assert proc.returncode == 0, proc.stderr
     rep = json.loads((tmp_path / "e.json").read_text())
-    assert rep["host_psnr"] >= min_host and rep["host_ssim"] > 0.75, rep  # measured 33.4 dB, 0.81 (coffee)
+    assert rep["host_psnr"] >= min_host and rep["host_ssim"] > 0.75, rep  # measured 31.8 dB, 0.76 (coffee)
     assert cv2.imread(str(snap)).shape == (formats.SNAPSHOT_SIZE, formats.SNAPSHOT_SIZE, 3)
     proc = run("restore", str(snap), "-o", str(out))
     assert proc.returncode == 0, proc.stderr
