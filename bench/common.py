@@ -162,13 +162,14 @@ def bench_progress(total: int, desc: str):
 
 def update_budget_curve(medium: str, points: list, severity: str, source: str) -> Path:
     """Write a medium's curve of payload size against restore fidelity, [(plane values, restore_psnr)],
-    into the package's `budget-curves.json`, which `fit --budget auto --medium` reads."""
+    into the package's `budget-curves.json`, which `fit --budget auto --medium` reads (the medium's other
+    entries, such as the print channel's model, are kept)."""
     from snapshot3d.paths import asset
     from snapshot3d.train.field.budget import CURVES_FILE
 
     path = asset(CURVES_FILE)
     curves = json.loads(path.read_text()) if path.is_file() else {}
-    curves[medium] = {"severity": severity, "points": sorted([int(v), round(float(p), 3)] for v, p in points),
-                      "source": source}
+    curves[medium] = {**curves.get(medium, {}), "severity": severity, "source": source,
+                      "points": sorted([int(v), round(float(p), 3)] for v, p in points)}
     path.write_text(json.dumps(curves, indent=2) + "\n")
     return path

@@ -67,3 +67,17 @@ def test_shipped_channel_constants():
     ch = print_channel()
     assert ch is not None, "budget-curves.json has no print channel: run 'snapshot3d bench print-predict'"
     assert 0.1 < ch.gain < 2 and 0.1 < ch.unit < 1000
+
+
+def test_writing_a_payload_curve_keeps_the_channel_model(tmp_path, monkeypatch):
+    import json
+
+    import snapshot3d.paths
+    from snapshot3d.bench.common import update_budget_curve
+
+    path = tmp_path / "budget-curves.json"
+    path.write_text(json.dumps({"print": {"points": [[1, 2.0]], "channel": {"gain": 0.5, "unit": 12.0}}}))
+    monkeypatch.setattr(snapshot3d.paths, "asset", lambda name: path)
+    update_budget_curve("print", [(3072, 25.0)], "moderate", "a test")
+    got = json.loads(path.read_text())["print"]
+    assert got["points"] == [[3072, 25.0]] and got["channel"] == {"gain": 0.5, "unit": 12.0}
