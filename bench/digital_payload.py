@@ -25,7 +25,6 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
-import cv2
 import numpy as np
 
 from snapshot3d import print_layout as pl
@@ -86,16 +85,12 @@ def source_order(res: int, channels: int) -> tuple[np.ndarray, np.ndarray]:
     return coef[order], plane[order]
 
 
-def _dct(planes: np.ndarray) -> np.ndarray:
-    return np.stack([cv2.dct(p.astype(np.float64)) for p in planes.reshape(-1, *planes.shape[-2:])]).ravel()
-
-
 def encode_source(planes: np.ndarray) -> np.ndarray:
     """planes (3, C, R, R) -> the embedded bitstream (M * INDEX_BITS,) uint8."""
     _, c, r, _ = planes.shape
     sig = _sigmas(r, c)
     levels = 1 << INDEX_BITS
-    idx = np.clip(np.floor((_dct(planes) + RANGE_SIGMAS * sig) / (2 * RANGE_SIGMAS * sig) * levels), 0, levels - 1)
+    idx = np.clip(np.floor((pl.plane_dct(planes) + RANGE_SIGMAS * sig) / (2 * RANGE_SIGMAS * sig) * levels), 0, levels - 1)
     coef, plane = source_order(r, c)
     return ((idx.astype(np.int64)[coef] >> (INDEX_BITS - 1 - plane)) & 1).astype(np.uint8)
 
@@ -113,8 +108,7 @@ def decode_source(bits: np.ndarray, res: int, channels: int) -> np.ndarray:
     top = idx >> (INDEX_BITS - known)                            # the known bits as an integer
     lo = -RANGE_SIGMAS + top * width
     value = sig * _gauss_mean(np.where(top == 0, -np.inf, lo), np.where(top == (1 << known) - 1, np.inf, lo + width))
-    c = value.reshape(3 * channels, res, res)
-    return np.stack([cv2.idct(x) for x in c]).reshape(3, channels, res, res).astype(np.float32)
+    return pl.plane_idct(value, (3, channels, res, res)).astype(np.float32)
 
 
 def _gauss_mean(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -192,7 +186,7 @@ def read_digital(capture: np.ndarray, res: int, channels: int, design: DigitalDe
         bits.append(dec[:info])
         layers += 1
     stream = np.concatenate(bits) if bits else np.zeros(0, np.uint8)
-    stream = stream[:len(source_order(res, channels)[0])]
+    stream = stream[:3 * channels * res * res * INDEX_BITS]
     mi = float("nan")
     if sent is not None:
         s = 1.0 - 2.0 * sent

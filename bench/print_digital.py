@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from snapshot3d import formats
+from snapshot3d.errors import UserError
 from snapshot3d.print_layout import embed
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import scene_meta
@@ -77,10 +78,13 @@ def _scene_rows(sname, scene, hosts, severities, seeds, size, bar) -> list[dict]
 def bench_print_digital_command(args) -> int:
     out = Path(args.out)
     t0 = time.time()
+    severities = [s for s in args.severities.split(",") if s]
+    unknown = [s for s in severities if s not in SEVERITIES]
+    if unknown or not severities:
+        raise UserError(f"--severities: unknown {', '.join(unknown) or '(none given)'}; choose from {', '.join(SEVERITIES)}")
     hosts = {h: load_host("builtin:" + h) for h in args.hosts.split(",") if h}
     hosts.update({Path(p).stem: load_host(p) for p in heldout_hosts(args.heldout)})
     scenes = {Path(p).stem: load_scene_file(p) for p in args.scenes.split(",")}
-    severities = [s for s in args.severities.split(",") if s]
     per = sum(len(capture_seeds(s, args.seeds)) for s in severities)
     rows = []
     with bench_progress(len(scenes) * len(hosts) * per, "captures") as bar:

@@ -31,7 +31,7 @@ import numpy as np
 from . import bands, formats
 
 __all__ = ["PrintLayout", "print_layout", "prior_spectrum", "allocate", "embed", "embed_values", "despread",
-           "read_carriers", "carrier_chips", "restore",
+           "read_carriers", "carrier_chips", "plane_dct", "plane_idct", "restore",
            "Reading", "PRINT_BANDS", "DESIGN_NOISE", "PAYLOAD_RMS", "PILOTS", "HOST_PSNR", "READ_NOISE", "cancel_share",
            "check_print_planes", "random_planes", "noise_map", "band_noise", "PRINT_NOISE"]
 
@@ -197,21 +197,23 @@ def random_planes(res: int, channels: int, rng: np.random.Generator) -> np.ndarr
     stand-in scene for training the restore network."""
     lam = prior_spectrum(res)
     coef = rng.normal(size=(3 * channels, res, res)) * np.sqrt(lam)
-    return np.clip(_idct(coef.ravel(), (3, channels, res, res)), -1, 1).astype(np.float32)
+    return np.clip(plane_idct(coef.ravel(), (3, channels, res, res)), -1, 1).astype(np.float32)
 
 
-def _dct(planes: np.ndarray) -> np.ndarray:
+def plane_dct(planes: np.ndarray) -> np.ndarray:
+    """planes (..., R, R) -> the orthonormal 2-D DCT of every channel, flattened (float64)."""
     return np.stack([cv2.dct(p.astype(np.float64)) for p in planes.reshape(-1, *planes.shape[-2:])]).ravel()
 
 
-def _idct(coef: np.ndarray, shape) -> np.ndarray:
+def plane_idct(coef: np.ndarray, shape) -> np.ndarray:
+    """The inverse of `plane_dct`: flat coefficients -> planes of `shape` (..., R, R), float64."""
     c = coef.reshape(-1, shape[-2], shape[-1])
     return np.stack([cv2.idct(x) for x in c]).reshape(shape)
 
 
 def carrier_values(lay: PrintLayout, planes: np.ndarray, strength: float = 1.0) -> np.ndarray:
     """planes (3, C, R, R) -> what each carrier must read (N,): pilots, then scaled DCT coefficients."""
-    vals = _dct(planes)[lay.coef] * lay.scale
+    vals = plane_dct(planes)[lay.coef] * lay.scale
     return strength * np.concatenate([lay.pilot_amp * lay.pilot_signs, vals])
 
 
@@ -350,5 +352,5 @@ def restore(read: np.ndarray, factor: np.ndarray, res: int, channels: int,
     missing[lay.coef] = False
     total_err = err.sum() + np.tile(prior_spectrum(res).ravel(), 3 * channels)[missing].sum()
     rmse = float(np.sqrt(total_err / coef.size))
-    planes = _idct(coef, (3, channels, res, res)).astype(np.float32)
+    planes = plane_idct(coef, (3, channels, res, res)).astype(np.float32)
     return planes, Reading(gain, float(unit * np.mean(factor)), rmse)
