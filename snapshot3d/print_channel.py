@@ -3,7 +3,9 @@ keep through a print without printing them (numpy; `fit --budget auto --medium p
 
 Model: a capture's carrier readings are `gain` times what the digital snapshot's read (`print_layout.
 despread`), plus Gaussian noise of power `unit` times each reading's relative noise power (the factor
-`despread` gives). The pilots measure both on a real capture (`measure`); `bench print-predict` takes
+`despread` gives). The pilots measure both on a real capture (`measure`): the capture read as `decode`
+reads it (its bands combined as the pilots say), the digital snapshot through the designed filters (a
+clean copy has no channel to adapt to); `bench print-predict` takes
 their medians over `moderate` captures and checks the predictions against measured restores.
 
 Why not a curve of payload size against restore_psnr: the loss depends on the scene's own plane spectrum
@@ -28,16 +30,16 @@ class ChannelModel:
     """noise power per carrier of unit relative noise power, in reading units"""
 
 
-def _reading(image: np.ndarray, res: int, channels: int):
-    read, factor = pl.despread(image, res, channels)
+def _reading(image: np.ndarray, res: int, channels: int, combine: bool):
+    read, factor = pl.despread(image, res, channels, combine=combine)
     return read, factor, pl.restore(read, factor, res, channels)[1]
 
 
 def measure(snapshot: np.ndarray, capture: np.ndarray, res: int, channels: int) -> ChannelModel:
     """The channel between a digital snapshot and the rectified capture of its print ((380, 380, 3) uint8
     RGB both), from the pilots of each."""
-    _, _, digital = _reading(snapshot, res, channels)
-    _, factor, captured = _reading(capture, res, channels)
+    _, _, digital = _reading(snapshot, res, channels, False)
+    _, factor, captured = _reading(capture, res, channels, True)
     return ChannelModel(captured.gain / max(digital.gain, 1e-9), captured.noise / float(np.mean(factor)))
 
 
@@ -46,6 +48,6 @@ def predicted_planes(host: np.ndarray, planes: np.ndarray, channel: ChannelModel
     """planes (3, C, R, R) in [-1, 1] embedded in host (380, 380, 3) float RGB in [0, 1] -> the planes a
     capture through `channel` restores (float32, one draw of its noise, before 8-bit rounding)."""
     _, c, r, _ = planes.shape
-    read, factor, _ = _reading(pl.embed(host, planes, host_psnr), r, c)
+    read, factor, _ = _reading(pl.embed(host, planes, host_psnr), r, c, False)
     sim = channel.gain * read + np.sqrt(channel.unit * factor) * rng.standard_normal(len(read))
     return pl.restore(sim, factor, r, c)[0]

@@ -31,7 +31,7 @@ import numpy as np
 from . import bands, formats
 
 __all__ = ["PrintLayout", "print_layout", "prior_spectrum", "allocate", "embed", "embed_values", "despread",
-           "read_carriers", "carrier_chips", "plane_dct", "plane_idct", "restore",
+           "read_carriers", "band_weights", "carrier_chips", "plane_dct", "plane_idct", "restore",
            "Reading", "PRINT_BANDS", "DESIGN_NOISE", "PAYLOAD_RMS", "PILOTS", "HOST_PSNR", "READ_NOISE", "cancel_share",
            "check_print_planes", "random_planes", "noise_map", "band_noise", "PRINT_NOISE"]
 
@@ -302,26 +302,81 @@ def _filters(lay: PrintLayout, img: np.ndarray):
 
 
 def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | None = None,
-             weighted: bool = True) -> tuple[np.ndarray, np.ndarray]:
+             weighted: bool = True, combine: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """What each carrier of (3, channels, res, res) planes reads in an image: `read_carriers` of their
     layout."""
-    return read_carriers(image, print_layout(res, channels), capture, weighted)
+    return read_carriers(image, print_layout(res, channels), capture, weighted, combine)
 
 
 def read_carriers(image: np.ndarray, lay: PrintLayout, capture: np.ndarray | None = None,
-                  weighted: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                  weighted: bool = True, combine: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """What each carrier reads in an image (380, 380, 3) (uint8, or float in [0, 1]): the readings (N,)
     and each reading's relative noise power (N,). The carriers' shapes follow the brightness of
     `capture` (default: the image itself; give the capture when `image` is the front-end's payload
     estimate). `weighted`: a matched filter that also listens less where the print is noisier (the
-    darks), for a raw capture; else matched to the carriers only (the front-end has weighed the places)."""
+    darks), for a raw capture; else matched to the carriers only (the front-end has weighed the places).
+    `combine` (weighted only): the bands are combined as the pilots say this capture kept them
+    (`band_weights`), not as designed."""
     img = image.astype(np.float64) / 255.0 if image.dtype == np.uint8 else np.asarray(image, np.float64)
     cap = img if capture is None else (capture / 255.0 if capture.dtype == np.uint8 else capture)
     w, q = _filters(lay, cap)
     noise = noise_map(cap)[lay.chips]
+    chips = _flat(bands.analyse(img))[lay.chips]
     if not weighted:
         q, noise = w, np.ones_like(noise)
-    return np.einsum("nk,nk->n", _flat(bands.analyse(img))[lay.chips], q), np.einsum("nk,nk->n", q * q, noise)
+    elif combine:
+        q, noise = band_weights(lay, chips, w, q, noise)
+    return np.einsum("nk,nk->n", chips, q), np.einsum("nk,nk->n", q * q, noise)
+
+
+def _chip_bands(lay: PrintLayout) -> np.ndarray:
+    """(N, K) int: the index in `PRINT_BANDS` of every chip's band."""
+    n = formats.SNAPSHOT_SIZE
+    edges = np.cumsum([int(np.prod(bands.band_shape(b, n))) for b in PRINT_BANDS])
+    return np.searchsorted(edges, lay.chips, side="right")
+
+
+def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarray,
+                 noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Combining the bands as this capture kept them: a print keeps its bands unequally (blur takes the
+    finest luma, a JPEG the chroma, the host's texture stays in the luma of 4-pixel cells), so each
+    carrier's reading becomes a weighted sum of its per-band partial readings, with the weights that
+    give the pilots' value the least noise: the pilots' per-band gains g and the covariance S of their
+    per-band residuals give weights S^-1 g (the minimum-variance combiner; S is not diagonal, because
+    the embedder cancelled the host's projection on the whole carrier, not on each band). chips (N, K):
+    the image's coefficients under the carriers; w, q (N, K): the carriers and their matched filters;
+    noise (N, K): the chips' modelled relative noise powers (returned as they are). Returns the filters
+    (N, K), scaled so that each carrier's expected reading stays its value times the pilots' overall
+    gain; the designed filters q when the pilots read no better through the combined ones."""
+    band = _chip_bands(lay)
+    nb, p = len(PRINT_BANDS), slice(0, PILOTS)
+
+    def per_band(x):   # (PILOTS, K) -> (PILOTS, nb) sums of x over each band's chips
+        out = np.zeros((PILOTS, nb))
+        np.add.at(out, (np.repeat(np.arange(PILOTS), x.shape[1]), band[p].ravel()), x.ravel())
+        return out
+
+    shape = per_band(q[p] * w[p]) * (lay.pilot_amp * lay.pilot_signs)[:, None]   # a pilot's value per band
+    read = per_band(q[p] * chips[p])
+    gain = np.einsum("nb,nb->b", read, shape) / np.maximum(np.einsum("nb,nb->b", shape, shape), 1e-30)
+    resid = read - gain * shape
+    cov = resid.T @ resid / PILOTS
+    cov += np.eye(nb) * 1e-3 * np.trace(cov) / nb          # a little shrinkage: 256 pilots, nb x nb
+    beta = np.linalg.solve(cov, gain * np.abs(shape).mean(0))
+    share = np.zeros((len(q), nb))   # each carrier's designed response per band
+    np.add.at(share, (np.repeat(np.arange(len(q)), q.shape[1]), band.ravel()), (q * w).ravel())
+    resp = share @ (beta * gain)
+    if np.median(resp) <= 0:
+        return q, noise
+    keep = (share @ gain) / np.where(resp > 1e-30, resp, 1e-30)
+    combined = q * beta[band] * keep[:, None]
+    signs = lay.pilot_signs
+
+    def pilot_snr(f):   # the pilots' SNR through filters f
+        x = np.einsum("nk,nk->n", chips[p], f[p]) * signs
+        return float(np.mean(x)) ** 2 / max(float(np.var(x)), 1e-30)
+
+    return (combined, noise) if pilot_snr(combined) > pilot_snr(q) else (q, noise)
 
 
 @dataclass(frozen=True)

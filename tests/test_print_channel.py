@@ -50,7 +50,7 @@ def test_model_limits(captured):
     scene, host, _, _ = captured
     r, c = scene.resolution, scene.channels
     truth, rng = scene.planes(), np.random.default_rng(1)
-    digital = _rmse(pl.restore(*pl.despread(pl.embed(host, truth), r, c), r, c)[0], truth)
+    digital = _rmse(pl.restore(*pl.despread(pl.embed(host, truth), r, c, combine=False), r, c)[0], truth)   # as the model reads it
     clean = _rmse(predicted_planes(host, truth, ChannelModel(1.0, 1e-12), rng), truth)
     assert clean == pytest.approx(digital, rel=0.02)
     errors = [_rmse(predicted_planes(host, truth, ChannelModel(0.5, u), rng), truth) for u in (1.0, 10.0, 100.0)]
