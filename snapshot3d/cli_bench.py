@@ -99,6 +99,18 @@ def add_bench_commands(bsub, add) -> None:
     bg.add_argument("--severities", default="none,jpeg75,mild,moderate,severe", help="comma-separated severities")
     _quick(bg, scenes="bench/models/spot-print.s3d", hosts="chelsea", heldout=0, seeds=1, severities="none,moderate")
 
+    bb = add(bsub, "print-bands", "which bands a print and a phone keep per unit of host fidelity, and the print "
+                                   "codec's candidate band sets through the real channel",
+             _run("snapshot3d.bench.print_bands", "bench_print_bands_command"))
+    _out(bb)
+    _scene_sweep(bb, "bench/models/spot-print.s3d,bench/models/lego-print-auto.s3d",
+                 "comma-separated scene files (the first also carries the all-band response rows)", "bundled host photos")
+    bb.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
+    bb.add_argument("--severities", default="jpeg75,mild,moderate,severe", help="comma-separated severities")
+    bb.add_argument("--pools", default="", help="comma-separated band sets (default: all of bench.print_bands.CANDIDATES)")
+    _quick(bb, scenes="bench/models/spot-print.s3d", hosts="chelsea", heldout=0, seeds=1, severities="moderate",
+           pools="print-1,chroma-4px")
+
     bc = add(bsub, "codec", "a medium's codec: host fidelity vs restore_psnr through simulate+scan; baselines; "
                             "charts (codec.* for the file medium, codec_print.* for the print medium)",
              _run("snapshot3d.bench.codec", "bench_codec_command"))

@@ -22,7 +22,7 @@ uint8 or float in [0, 1]; carrier values (N,) float, pilots first.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import cv2
@@ -30,9 +30,9 @@ import numpy as np
 
 from . import bands, formats
 
-__all__ = ["PrintLayout", "print_layout", "prior_spectrum", "allocate", "embed", "embed_values", "despread",
-           "read_carriers", "band_weights", "carrier_chips", "plane_dct", "plane_idct", "restore",
-           "Reading", "PRINT_BANDS", "DESIGN_NOISE", "PAYLOAD_RMS", "PILOTS", "HOST_PSNR", "READ_NOISE", "cancel_share",
+__all__ = ["PrintLayout", "print_layout", "make_layout", "restore_layout", "prior_spectrum", "allocate", "embed", "embed_values", "despread",
+           "read_carriers", "band_weights", "band_response", "carrier_chips", "plane_dct", "plane_idct", "restore",
+           "Reading", "PRINT_BANDS", "BAND_SETS", "DESIGN_NOISE", "PAYLOAD_RMS", "PILOTS", "HOST_PSNR", "READ_NOISE", "cancel_share",
            "check_print_planes", "random_planes", "noise_map", "band_noise", "PRINT_NOISE"]
 
 # detail bands that carry the payload, with their relative energy per coefficient: the luma band of
@@ -41,6 +41,9 @@ __all__ = ["PrintLayout", "print_layout", "prior_spectrum", "allocate", "embed",
 # and lens, the coarser (8-pixel) bands carry too much of the host's own texture, which the decoder must
 # then treat as noise or the embedder must pay to cancel
 PRINT_BANDS = {"Y2LH": 1.0, "Y2HL": 1.0, "Y2HH": 1.0, "Y1LH": 0.5, "Y1HL": 0.5, "RG2LH": 0.5, "RG2HL": 0.5}
+BAND_SETS = {"print-1": PRINT_BANDS}
+"""the carrier bands and their relative energy per coefficient, per print codec id (other band sets are
+bench candidates: `bench.print_bands`)"""
 READ_NOISE = 0.003
 """channel noise per carrier reading (at the payload's design scale) the host cancellation is weighed
 against (`moderate` photos)"""
@@ -91,7 +94,7 @@ def allocate(lam: np.ndarray, total: float, noise: float) -> np.ndarray:
 @dataclass(frozen=True)
 class PrintLayout:
     """The carriers of one plane size. chips (N, K) int: coefficient indices of each carrier in the flat
-    pool of `PRINT_BANDS`; base (N, K) float: the carrier's entries before the host's brightness shapes
+    pool of its codec's bands (`BAND_SETS`); base (N, K) float: the carrier's entries before the host's brightness shapes
     them (a random sign times the square root of its band's weight); coef (M,) int: the flat DCT
     coefficient (of 3*C*R*R, plane-major) each non-pilot carrier holds; scale (M,): its amplitude per
     unit coefficient at strength 1; prior (M,): the coefficient's expected square."""
@@ -105,24 +108,26 @@ class PrintLayout:
     prior: np.ndarray
     pilot_amp: float
     pilot_signs: np.ndarray
+    bands: dict[str, float] = field(default_factory=lambda: dict(PRINT_BANDS))
+    """its carrier bands and their relative energies per coefficient (a codec's: `BAND_SETS`)"""
 
     @property
     def carriers(self) -> int:
         return len(self.chips)
 
 
-def _pool_weights() -> np.ndarray:
+def _pool_weights(pool: dict[str, float]) -> np.ndarray:
     n = formats.SNAPSHOT_SIZE
-    return np.concatenate([np.full(int(np.prod(bands.band_shape(b, n))), w) for b, w in PRINT_BANDS.items()])
+    return np.concatenate([np.full(int(np.prod(bands.band_shape(b, n))), w) for b, w in pool.items()])
 
 
-def _flat(coeffs: dict) -> np.ndarray:
-    return np.concatenate([coeffs[b].ravel() for b in PRINT_BANDS])
+def _flat(coeffs: dict, pool: dict[str, float]) -> np.ndarray:
+    return np.concatenate([coeffs[b].ravel() for b in pool])
 
 
-def _unflat(vec: np.ndarray, coeffs: dict) -> dict:
+def _unflat(vec: np.ndarray, coeffs: dict, pool: dict[str, float]) -> dict:
     out, i = dict(coeffs), 0
-    for b in PRINT_BANDS:
+    for b in pool:
         n = coeffs[b].size
         out[b] = vec[i:i + n].reshape(coeffs[b].shape)
         i += n
@@ -141,8 +146,8 @@ PRINT_NOISE = 3e-4
 """the print's own noise power per coefficient (halftone, paper, sensor) per unit of `_srgb_slope` squared"""
 
 
-def band_noise(image: np.ndarray) -> dict[str, np.ndarray]:
-    """Noise power a carrier chip meets at every coefficient of each of `PRINT_BANDS` (band -> (h, w)),
+def band_noise(image: np.ndarray, pool: dict[str, float] = PRINT_BANDS) -> dict[str, np.ndarray]:
+    """Noise power a carrier chip meets at every coefficient of each band of `pool` (band -> (h, w)),
     estimated from an image (380, 380, 3) float sRGB in [0, 1] alone, so that the embedder (from the
     snapshot) and the decoder (from the capture) agree: the print's noise (halftone, paper, sensor) is
     even in linear light, so in sRGB it grows with the slope of the sRGB curve at the blurred grey there,
@@ -155,20 +160,21 @@ def band_noise(image: np.ndarray) -> dict[str, np.ndarray]:
             2: cv2.resize(grey, (n // 4, n // 4), interpolation=cv2.INTER_AREA),
             3: cv2.resize(grey[:e, :e], (n // 8, n // 8), interpolation=cv2.INTER_AREA)}
     noise = {lvl: PRINT_NOISE * np.minimum(_srgb_slope(m.astype(np.float64)) ** 2, 100.0) for lvl, m in maps.items()}
-    return {b: noise[int(b[-3])] for b in PRINT_BANDS}
+    return {b: noise[int(b[-3])] for b in pool}
 
 
-def noise_map(image: np.ndarray) -> np.ndarray:
+def noise_map(image: np.ndarray, pool: dict[str, float] = PRINT_BANDS) -> np.ndarray:
     """`band_noise` flattened in the order of the carriers' pool (M,)."""
-    per = band_noise(image)
-    return np.concatenate([per[b].ravel() for b in PRINT_BANDS])
+    per = band_noise(image, pool)
+    return np.concatenate([per[b].ravel() for b in pool])
 
 
-def carrier_chips(count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """`count` disjoint carriers over the pool of `PRINT_BANDS`, as many chips each as fit: chips (count, K)
+def carrier_chips(count: int, rng: np.random.Generator,
+                  pool: dict[str, float] = PRINT_BANDS) -> tuple[np.ndarray, np.ndarray]:
+    """`count` disjoint carriers over the bands of `pool`, as many chips each as fit: chips (count, K)
     int indices into the pool and their entries (count, K) (a random sign times the square root of the
     band's weight)."""
-    pool_w = _pool_weights()
+    pool_w = _pool_weights(pool)
     k = len(pool_w) // count
     if k < 1:
         raise ValueError(f"{count} carriers do not fit the snapshot's {len(pool_w)} coefficients")
@@ -177,8 +183,17 @@ def carrier_chips(count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.
 
 
 @lru_cache(maxsize=8)
-def print_layout(res: int, channels: int) -> PrintLayout:
-    """The carriers of (3, channels, res, res) planes (deterministic: both sides build the same)."""
+def print_layout(res: int, channels: int, codec: str = formats.PRINT_CODEC) -> PrintLayout:
+    """The carriers of (3, channels, res, res) planes in codec `codec`'s bands (deterministic: both sides
+    build the same)."""
+    if codec not in BAND_SETS:
+        raise ValueError(f"unknown print codec {codec!r}: this build has {', '.join(BAND_SETS)}")
+    return make_layout(res, channels, BAND_SETS[codec])
+
+
+def make_layout(res: int, channels: int, pool: dict[str, float]) -> PrintLayout:
+    """The carriers of (3, channels, res, res) planes over any bands `pool` (name -> relative energy per
+    coefficient; a codec's are `BAND_SETS`, other pools are bench candidates)."""
     check_print_planes(channels, res)
     n = formats.SNAPSHOT_SIZE
     lam = np.tile(prior_spectrum(res).ravel(), 3 * channels)
@@ -186,10 +201,10 @@ def print_layout(res: int, channels: int) -> PrintLayout:
     power = allocate(lam, total * (1 - _PILOT_SHARE), DESIGN_NOISE)
     active = np.flatnonzero(power > 1e-9 * total)
     rng = np.random.default_rng(_SEED + 1000 * res + channels)
-    chips, w = carrier_chips(PILOTS + len(active), rng)
+    chips, w = carrier_chips(PILOTS + len(active), rng, pool)
     pilot_amp = float(np.sqrt(total * _PILOT_SHARE / PILOTS))
     return PrintLayout(res, channels, chips, w, active, np.sqrt(power[active] / lam[active]), lam[active],
-                       pilot_amp, rng.choice([-1.0, 1.0], size=PILOTS))
+                       pilot_amp, rng.choice([-1.0, 1.0], size=PILOTS), dict(pool))
 
 
 def random_planes(res: int, channels: int, rng: np.random.Generator) -> np.ndarray:
@@ -223,7 +238,7 @@ def cancel_share(host: np.ndarray, lay: PrintLayout, host_psnr: float) -> float:
     times it as interference; the share that gives the best reading SNR for this host at this fidelity,
     against READ_NOISE. A smooth host is cancelled wholly, a busy one in part."""
     w, q = _filters(lay, np.asarray(host, np.float64))
-    own = np.einsum("nk,nk->n", _flat(bands.analyse(host))[lay.chips], q)
+    own = np.einsum("nk,nk->n", _flat(bands.analyse(host), lay.bands)[lay.chips], q)
     inter = float(np.mean(own ** 2))                       # per carrier
     budget = 10 ** (-host_psnr / 10) * host.size / lay.carriers
     lam = np.linspace(0.0, 1.0, 41)
@@ -233,7 +248,7 @@ def cancel_share(host: np.ndarray, lay: PrintLayout, host_psnr: float) -> float:
 
 
 def embed(host: np.ndarray, planes: np.ndarray, host_psnr: float = HOST_PSNR, rounds: int = 4,
-          cancel: float | None = None, with_payload: bool = False):
+          cancel: float | None = None, with_payload: bool = False, codec: str = formats.PRINT_CODEC):
     """host (380, 380, 3) float RGB in [0, 1], planes (3, C, R, R) in [-1, 1] -> snapshot (380, 380, 3)
     uint8 RGB at `host_psnr` dB from the host (the payload's power is scaled to it; the pilots tell the
     decoder the scale) whose every carrier reads its value plus what is left of the host's own projection:
@@ -241,16 +256,16 @@ def embed(host: np.ndarray, planes: np.ndarray, host_psnr: float = HOST_PSNR, ro
     are corrected by `rounds` projections. `with_payload`: also the payload pattern alone (380, 380, 3)
     float32, the carriers times their values with no host (what the restore front-end learns to find)."""
     _, c, r, _ = planes.shape
-    lay = print_layout(r, c)
+    lay = print_layout(r, c, codec)
     unit = carrier_values(lay, planes)
     snap, scaled = embed_values(host, lay, unit, host_psnr, rounds, cancel)
     if not with_payload:
         return snap
     w, _ = _filters(lay, snap / 255.0)
     coeffs = {b: np.zeros_like(v) for b, v in bands.analyse(snap / 255.0).items()}
-    vec = _flat(coeffs)
+    vec = _flat(coeffs, lay.bands)
     vec[lay.chips] = w * scaled[:, None]
-    return snap, bands.synthesise(_unflat(vec, coeffs)).astype(np.float32)
+    return snap, bands.synthesise(_unflat(vec, coeffs, lay.bands)).astype(np.float32)
 
 
 def embed_values(host: np.ndarray, lay: PrintLayout, unit: np.ndarray, host_psnr: float = HOST_PSNR,
@@ -282,18 +297,18 @@ def _embed_scaled(lay: PrintLayout, host: np.ndarray, target: np.ndarray, rounds
     for _ in range(rounds + 1):
         w, q = _filters(lay, img)   # as the decoder will see them in this very image
         coeffs = bands.analyse(img)
-        vec = _flat(coeffs)
+        vec = _flat(coeffs, lay.bands)
         read = np.einsum("nk,nk->n", vec[lay.chips], q)
         own = read if own is None else own   # the host's own projection, measured once
         vec[lay.chips] += w * (target + (1.0 - cancel) * own - read)[:, None]
-        img = np.round(np.clip(bands.synthesise(_unflat(vec, coeffs)), 0.0, 1.0) * 255.0) / 255.0
+        img = np.round(np.clip(bands.synthesise(_unflat(vec, coeffs, lay.bands)), 0.0, 1.0) * 255.0) / 255.0
     return (img * 255.0 + 0.5).astype(np.uint8)
 
 
 def _filters(lay: PrintLayout, img: np.ndarray):
     """The carriers w (N, K) shaped by the brightness of `img`, the matched filters q (N, K) that read
     them (weighted by 1 / noise, <q_i, w_i> = 1) and the chips' relative noise powers (N, K)."""
-    noise = noise_map(img)[lay.chips]
+    noise = noise_map(img, lay.bands)[lay.chips]
     w = lay.base / np.sqrt(noise)
     w /= np.linalg.norm(w, axis=1, keepdims=True)
     q = w / noise
@@ -302,10 +317,10 @@ def _filters(lay: PrintLayout, img: np.ndarray):
 
 
 def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | None = None,
-             weighted: bool = True, combine: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """What each carrier of (3, channels, res, res) planes reads in an image: `read_carriers` of their
-    layout."""
-    return read_carriers(image, print_layout(res, channels), capture, weighted, combine)
+             weighted: bool = True, combine: bool = True, codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, np.ndarray]:
+    """What each carrier of (3, channels, res, res) planes in codec `codec` reads in an image:
+    `read_carriers` of their layout."""
+    return read_carriers(image, print_layout(res, channels, codec), capture, weighted, combine)
 
 
 def read_carriers(image: np.ndarray, lay: PrintLayout, capture: np.ndarray | None = None,
@@ -320,8 +335,8 @@ def read_carriers(image: np.ndarray, lay: PrintLayout, capture: np.ndarray | Non
     img = image.astype(np.float64) / 255.0 if image.dtype == np.uint8 else np.asarray(image, np.float64)
     cap = img if capture is None else (capture / 255.0 if capture.dtype == np.uint8 else capture)
     w, q = _filters(lay, cap)
-    noise = noise_map(cap)[lay.chips]
-    chips = _flat(bands.analyse(img))[lay.chips]
+    noise = noise_map(cap, lay.bands)[lay.chips]
+    chips = _flat(bands.analyse(img), lay.bands)[lay.chips]
     if not weighted:
         q, noise = w, np.ones_like(noise)
     elif combine:
@@ -330,10 +345,31 @@ def read_carriers(image: np.ndarray, lay: PrintLayout, capture: np.ndarray | Non
 
 
 def _chip_bands(lay: PrintLayout) -> np.ndarray:
-    """(N, K) int: the index in `PRINT_BANDS` of every chip's band."""
+    """(N, K) int: the index in `lay.bands` of every chip's band."""
     n = formats.SNAPSHOT_SIZE
-    edges = np.cumsum([int(np.prod(bands.band_shape(b, n))) for b in PRINT_BANDS])
+    edges = np.cumsum([int(np.prod(bands.band_shape(b, n))) for b in lay.bands])
     return np.searchsorted(edges, lay.chips, side="right")
+
+
+def _per_band(band: np.ndarray, x: np.ndarray, nb: int) -> np.ndarray:
+    """x (N, K) at chips whose bands are `band` (N, K) -> (N, nb) the sums of x over each band's chips."""
+    idx = (np.arange(len(x))[:, None] * nb + band).ravel()
+    return np.bincount(idx, weights=x.ravel(), minlength=len(x) * nb).reshape(len(x), nb)
+
+
+def band_response(capture: np.ndarray, snapshot: np.ndarray, lay: PrintLayout) -> tuple[np.ndarray, np.ndarray]:
+    """What a capture kept of each band of `lay` (bench): the gain (nb,) of every carrier's partial reading
+    in that band against the digital snapshot's, and the noise power left (nb,) relative to the print noise
+    model (`band_noise`). Both (380, 380, 3) uint8 RGB. gain^2 / noise is what a unit of payload energy in
+    that band is worth to the combining receiver."""
+    cap = capture / 255.0
+    w, q = _filters(lay, cap)
+    band, nb = _chip_bands(lay), len(lay.bands)
+    read = _per_band(band, _flat(bands.analyse(cap), lay.bands)[lay.chips] * q, nb)
+    sent = _per_band(band, _flat(bands.analyse(snapshot / 255.0), lay.bands)[lay.chips] * q, nb)
+    var = _per_band(band, q * q * noise_map(cap, lay.bands)[lay.chips], nb)
+    gain = np.einsum("nb,nb->b", read, sent) / np.maximum(np.einsum("nb,nb->b", sent, sent), 1e-30)
+    return gain, np.sum((read - gain * sent) ** 2, axis=0) / np.maximum(var.sum(0), 1e-30)
 
 
 def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarray,
@@ -349,12 +385,10 @@ def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarr
     (N, K), scaled so that each carrier's expected reading stays its value times the pilots' overall
     gain; the designed filters q when the pilots read no better through the combined ones."""
     band = _chip_bands(lay)
-    nb, p = len(PRINT_BANDS), slice(0, PILOTS)
+    nb, p = len(lay.bands), slice(0, PILOTS)
 
     def per_band(x):   # (PILOTS, K) -> (PILOTS, nb) sums of x over each band's chips
-        out = np.zeros((PILOTS, nb))
-        np.add.at(out, (np.repeat(np.arange(PILOTS), x.shape[1]), band[p].ravel()), x.ravel())
-        return out
+        return _per_band(band[p], x, nb)
 
     shape = per_band(q[p] * w[p]) * (lay.pilot_amp * lay.pilot_signs)[:, None]   # a pilot's value per band
     read = per_band(q[p] * chips[p])
@@ -363,8 +397,7 @@ def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarr
     cov = resid.T @ resid / PILOTS
     cov += np.eye(nb) * 1e-3 * np.trace(cov) / nb          # a little shrinkage: 256 pilots, nb x nb
     beta = np.linalg.solve(cov, gain * np.abs(shape).mean(0))
-    share = np.zeros((len(q), nb))   # each carrier's designed response per band
-    np.add.at(share, (np.repeat(np.arange(len(q)), q.shape[1]), band.ravel()), (q * w).ravel())
+    share = _per_band(band, q * w, nb)   # each carrier's designed response per band
     resp = share @ (beta * gain)
     if np.median(resp) <= 0:
         return q, noise
@@ -390,11 +423,17 @@ class Reading:
 
 
 def restore(read: np.ndarray, factor: np.ndarray, res: int, channels: int,
-            strength: float = 1.0) -> tuple[np.ndarray, Reading]:
+            strength: float = 1.0, codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, Reading]:
     """Carrier readings (N,) and their relative noise powers (N,) (`despread`) -> planes (3, C, R, R)
     float32 (the MMSE estimate, not clipped) and the pilots' `Reading` (gain; noise per carrier of average
     noise factor)."""
-    lay = print_layout(res, channels)
+    return restore_layout(print_layout(res, channels, codec), read, factor, strength)
+
+
+def restore_layout(lay: PrintLayout, read: np.ndarray, factor: np.ndarray,
+                   strength: float = 1.0) -> tuple[np.ndarray, Reading]:
+    """`restore` with any layout (`make_layout`)."""
+    res, channels = lay.res, lay.channels
     pilots = read[:PILOTS] * lay.pilot_signs / strength
     gain = max(float(np.mean(pilots)) / lay.pilot_amp, 1e-3)
     unit = max(float(np.mean((pilots - gain * lay.pilot_amp) ** 2 / factor[:PILOTS])), 1e-14)

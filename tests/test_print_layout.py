@@ -139,3 +139,20 @@ def test_bands_are_combined_as_the_capture_kept_them(embedded):
     assert abs(err["lossy", True][1].gain / err["lossy", False][1].gain - 1) < 0.1
     for key in err:   # the pilots still predict the error without ground truth
         assert 0.6 < err[key][1].plane_rmse / err[key][0] < 1.6, key
+
+
+def test_band_response_sees_what_a_copy_kept(embedded):
+    """`band_response` (the bench's per-band measure, any band set via `make_layout`): a lossless copy keeps
+    every band at gain 1; a copy that lost one band shows gain 0 there and 1 elsewhere."""
+    host, planes, _ = embedded
+    lay = print_layout.make_layout(32, 4, {"Y2LH": 1.0, "RG2HL": 1.0, "YB3HH": 2.0})
+    snap, _ = print_layout.embed_values(host, lay, print_layout.carrier_values(lay, planes))
+    gain, noise = print_layout.band_response(snap, snap, lay)
+    assert np.allclose(gain, 1.0) and np.all(noise < 1e-12)
+    coeffs = bands.analyse(snap / 255.0)
+    coeffs["RG2HL"] = np.zeros_like(coeffs["RG2HL"])
+    lossy = np.clip(np.round(bands.synthesise(coeffs) * 255), 0, 255).astype(np.uint8)
+    gain, noise = print_layout.band_response(lossy, snap, lay)
+    assert abs(gain[1]) < 0.05 and np.all(np.abs(gain[[0, 2]] - 1) < 0.05), gain
+    est = print_layout.restore_layout(lay, *print_layout.read_carriers(snap, lay))[0]
+    assert _rmse(est, planes) < 0.5 * planes.std()   # any band set carries the planes
