@@ -39,6 +39,13 @@ def _scene_sweep(p, scenes: str, scenes_help: str, hosts_help: str) -> None:
     p.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
 
 
+def _print_sweep(p, scenes_help: str, severities: str) -> None:
+    """`_scene_sweep` over the print ladder's scenes, plus --heldout and --severities."""
+    _scene_sweep(p, "bench/models/spot-print.s3d,bench/models/lego-print-auto.s3d", scenes_help, "bundled host photos")
+    p.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
+    p.add_argument("--severities", default=severities, help="comma-separated severities")
+
+
 def add_bench_commands(bsub, add) -> None:
     """Add every benchmark to the `bench` subparsers `bsub`; `add(sub, name, help, func)` makes a parser."""
     bf = add(bsub, "fit", "field_psnr against scene_kb and fit time, spot and lego; training throughput",
@@ -93,20 +100,15 @@ def add_bench_commands(bsub, add) -> None:
                                      "captures, and what an ideal code could carry",
              _run("snapshot3d.bench.print_digital", "bench_print_digital_command"))
     _out(bg)
-    _scene_sweep(bg, "bench/models/spot-print.s3d,bench/models/lego-print-auto.s3d",
-                 "comma-separated scene files (the print ladder's choices)", "bundled host photos")
-    bg.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
-    bg.add_argument("--severities", default="none,jpeg75,mild,moderate,severe", help="comma-separated severities")
+    _print_sweep(bg, "comma-separated scene files (the print ladder's choices)", "none,jpeg75,mild,moderate,severe")
     _quick(bg, scenes="bench/models/spot-print.s3d", hosts="chelsea", heldout=0, seeds=1, severities="none,moderate")
 
     bb = add(bsub, "print-bands", "which bands a print and a phone keep per unit of host fidelity, and the print "
                                    "codec's candidate band sets through the real channel",
              _run("snapshot3d.bench.print_bands", "bench_print_bands_command"))
     _out(bb)
-    _scene_sweep(bb, "bench/models/spot-print.s3d,bench/models/lego-print-auto.s3d",
-                 "comma-separated scene files (the first also carries the all-band response rows)", "bundled host photos")
-    bb.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
-    bb.add_argument("--severities", default="jpeg75,mild,moderate,severe", help="comma-separated severities")
+    _print_sweep(bb, "comma-separated scene files (the first also carries the all-band response rows)",
+                 "jpeg75,mild,moderate,severe")
     bb.add_argument("--pools", default="", help="comma-separated band sets (default: all of bench.print_bands.CANDIDATES)")
     _quick(bb, scenes="bench/models/spot-print.s3d", hosts="chelsea", heldout=0, seeds=1, severities="moderate",
            pools="print-1,chroma-4px")
