@@ -6,7 +6,7 @@ print codec's candidate band sets through the real channel (sheet -> `simulate` 
   fidelity; per capture and band, the gain of the carriers' partial readings against the digital
   snapshot's and the noise left, relative to the print noise model (`print_layout.band_response`);
   `eta` = gain^2 / noise, what a unit of payload energy in that band is worth to the combining receiver.
-- `pool` rows: each candidate band set (`CANDIDATES`: the codecs' own and others) embedded, captured with
+- `pool` rows: each candidate band set (`CANDIDATES`: the codec's own and others) embedded, captured with
   the same seeds and read by the combining receiver: `restore_psnr` (orbit views against the scene's own),
   `host_psnr`, `host_ssim`.
 
@@ -32,7 +32,7 @@ from .common import SEVERITIES, ViewJudge, bench_progress, capture_seeds, psnr, 
 __all__ = ["bench_print_bands_command", "CANDIDATES"]
 
 CANDIDATES = {
-    **pl.BAND_SETS,
+    "print-1": pl.PRINT_BANDS,
     "chroma-4px": {"RG2LH": 1.0, "RG2HL": 1.0, "YB2LH": 1.0, "YB2HL": 1.0, "Y2HH": 1.0, "RG2HH": 0.5},
     "chroma-8px": {"RG2LH": 1.0, "RG2HL": 1.0, "RG3LH": 4.0, "RG3HL": 4.0, "RG3HH": 4.0, "YB2LH": 1.0,
                    "YB2HL": 1.0, "Y2HH": 1.0},
@@ -61,6 +61,7 @@ def bench_print_bands_command(args) -> int:
     first = next(iter(scenes.values()))
     every = pl.make_layout(first.resolution, first.channels, {b: 1.0 for b in bands.DETAIL_BANDS})
     per_host = sum(len(capture_seeds(s, args.seeds)) for s in sevs)
+    judges = {name: ViewJudge(scene, args.size) for name, scene in scenes.items()}   # reference views, once
     rows = []
     with bench_progress(len(hosts) * per_host * (1 + len(pools) * len(scenes)), "captures") as bar:
         for hname, host in hosts.items():
@@ -78,7 +79,7 @@ def bench_print_bands_command(args) -> int:
                               "gain": float(g), "noise": float(n), "eta": float(g * g / max(n, 1e-30))}
                              for b, g, n in zip(every.bands, gain, noise)]
             for sname, scene in scenes.items():
-                judge, meta = ViewJudge(scene, args.size), scene_meta(scene, formats.PRINT_CODEC)
+                judge, meta = judges[sname], scene_meta(scene, formats.PRINT_CODEC)
                 for name, pool in pools.items():
                     lay = pl.make_layout(scene.resolution, scene.channels, pool)
                     snap, _ = pl.embed_values(host, lay, pl.carrier_values(lay, scene.planes()))

@@ -32,7 +32,7 @@ from . import bands, formats
 
 __all__ = ["PrintLayout", "print_layout", "make_layout", "restore_layout", "prior_spectrum", "allocate", "embed", "embed_values", "despread",
            "read_carriers", "band_weights", "band_response", "carrier_chips", "plane_dct", "plane_idct", "restore",
-           "Reading", "PRINT_BANDS", "BAND_SETS", "DESIGN_NOISE", "PAYLOAD_RMS", "PILOTS", "HOST_PSNR", "READ_NOISE", "cancel_share",
+           "Reading", "PRINT_BANDS", "DESIGN_NOISE", "PAYLOAD_RMS", "PILOTS", "HOST_PSNR", "READ_NOISE", "cancel_share",
            "check_print_planes", "random_planes", "noise_map", "band_noise", "PRINT_NOISE"]
 
 # detail bands that carry the payload, with their relative energy per coefficient: the luma band of
@@ -41,9 +41,6 @@ __all__ = ["PrintLayout", "print_layout", "make_layout", "restore_layout", "prio
 # and lens, the coarser (8-pixel) bands carry too much of the host's own texture, which the decoder must
 # then treat as noise or the embedder must pay to cancel
 PRINT_BANDS = {"Y2LH": 1.0, "Y2HL": 1.0, "Y2HH": 1.0, "Y1LH": 0.5, "Y1HL": 0.5, "RG2LH": 0.5, "RG2HL": 0.5}
-BAND_SETS = {"print-1": PRINT_BANDS}
-"""the carrier bands and their relative energy per coefficient, per print codec id (other band sets are
-bench candidates: `bench.print_bands`)"""
 READ_NOISE = 0.003
 """channel noise per carrier reading (at the payload's design scale) the host cancellation is weighed
 against (`moderate` photos)"""
@@ -94,7 +91,7 @@ def allocate(lam: np.ndarray, total: float, noise: float) -> np.ndarray:
 @dataclass(frozen=True)
 class PrintLayout:
     """The carriers of one plane size. chips (N, K) int: coefficient indices of each carrier in the flat
-    pool of its codec's bands (`BAND_SETS`); base (N, K) float: the carrier's entries before the host's brightness shapes
+    pool of its bands; base (N, K) float: the carrier's entries before the host's brightness shapes
     them (a random sign times the square root of its band's weight); coef (M,) int: the flat DCT
     coefficient (of 3*C*R*R, plane-major) each non-pilot carrier holds; scale (M,): its amplitude per
     unit coefficient at strength 1; prior (M,): the coefficient's expected square."""
@@ -109,7 +106,7 @@ class PrintLayout:
     pilot_amp: float
     pilot_signs: np.ndarray
     bands: dict[str, float] = field(default_factory=lambda: dict(PRINT_BANDS))
-    """its carrier bands and their relative energies per coefficient (a codec's: `BAND_SETS`)"""
+    """its carrier bands and their relative energies per coefficient (the codec's: `PRINT_BANDS`)"""
 
     @property
     def carriers(self) -> int:
@@ -183,17 +180,14 @@ def carrier_chips(count: int, rng: np.random.Generator,
 
 
 @lru_cache(maxsize=8)
-def print_layout(res: int, channels: int, codec: str = formats.PRINT_CODEC) -> PrintLayout:
-    """The carriers of (3, channels, res, res) planes in codec `codec`'s bands (deterministic: both sides
-    build the same)."""
-    if codec not in BAND_SETS:
-        raise ValueError(f"unknown print codec {codec!r}: this build has {', '.join(BAND_SETS)}")
-    return make_layout(res, channels, BAND_SETS[codec])
+def print_layout(res: int, channels: int) -> PrintLayout:
+    """The carriers of (3, channels, res, res) planes (deterministic: both sides build the same)."""
+    return make_layout(res, channels, PRINT_BANDS)
 
 
 def make_layout(res: int, channels: int, pool: dict[str, float]) -> PrintLayout:
     """The carriers of (3, channels, res, res) planes over any bands `pool` (name -> relative energy per
-    coefficient; a codec's are `BAND_SETS`, other pools are bench candidates)."""
+    coefficient; the codec's are `PRINT_BANDS`, others are bench candidates: `bench.print_bands`)."""
     check_print_planes(channels, res)
     n = formats.SNAPSHOT_SIZE
     lam = np.tile(prior_spectrum(res).ravel(), 3 * channels)
@@ -248,7 +242,7 @@ def cancel_share(host: np.ndarray, lay: PrintLayout, host_psnr: float) -> float:
 
 
 def embed(host: np.ndarray, planes: np.ndarray, host_psnr: float = HOST_PSNR, rounds: int = 4,
-          cancel: float | None = None, with_payload: bool = False, codec: str = formats.PRINT_CODEC):
+          cancel: float | None = None, with_payload: bool = False):
     """host (380, 380, 3) float RGB in [0, 1], planes (3, C, R, R) in [-1, 1] -> snapshot (380, 380, 3)
     uint8 RGB at `host_psnr` dB from the host (the payload's power is scaled to it; the pilots tell the
     decoder the scale) whose every carrier reads its value plus what is left of the host's own projection:
@@ -256,7 +250,7 @@ def embed(host: np.ndarray, planes: np.ndarray, host_psnr: float = HOST_PSNR, ro
     are corrected by `rounds` projections. `with_payload`: also the payload pattern alone (380, 380, 3)
     float32, the carriers times their values with no host (what the restore front-end learns to find)."""
     _, c, r, _ = planes.shape
-    lay = print_layout(r, c, codec)
+    lay = print_layout(r, c)
     unit = carrier_values(lay, planes)
     snap, scaled = embed_values(host, lay, unit, host_psnr, rounds, cancel)
     if not with_payload:
@@ -317,10 +311,10 @@ def _filters(lay: PrintLayout, img: np.ndarray):
 
 
 def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | None = None,
-             weighted: bool = True, combine: bool = True, codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, np.ndarray]:
-    """What each carrier of (3, channels, res, res) planes in codec `codec` reads in an image:
-    `read_carriers` of their layout."""
-    return read_carriers(image, print_layout(res, channels, codec), capture, weighted, combine)
+             weighted: bool = True, combine: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """What each carrier of (3, channels, res, res) planes reads in an image: `read_carriers` of their
+    layout."""
+    return read_carriers(image, print_layout(res, channels), capture, weighted, combine)
 
 
 def read_carriers(image: np.ndarray, lay: PrintLayout, capture: np.ndarray | None = None,
@@ -357,6 +351,13 @@ def _per_band(band: np.ndarray, x: np.ndarray, nb: int) -> np.ndarray:
     return np.bincount(idx, weights=x.ravel(), minlength=len(x) * nb).reshape(len(x), nb)
 
 
+def _band_fit(read: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per band, the least-squares gain (nb,) of partial readings (n, nb) on their reference (n, nb), and
+    the residuals (n, nb)."""
+    gain = np.einsum("nb,nb->b", read, ref) / np.maximum(np.einsum("nb,nb->b", ref, ref), 1e-30)
+    return gain, read - gain * ref
+
+
 def band_response(capture: np.ndarray, snapshot: np.ndarray, lay: PrintLayout) -> tuple[np.ndarray, np.ndarray]:
     """What a capture kept of each band of `lay` (bench): the gain (nb,) of every carrier's partial reading
     in that band against the digital snapshot's, and the noise power left (nb,) relative to the print noise
@@ -368,8 +369,8 @@ def band_response(capture: np.ndarray, snapshot: np.ndarray, lay: PrintLayout) -
     read = _per_band(band, _flat(bands.analyse(cap), lay.bands)[lay.chips] * q, nb)
     sent = _per_band(band, _flat(bands.analyse(snapshot / 255.0), lay.bands)[lay.chips] * q, nb)
     var = _per_band(band, q * q * noise_map(cap, lay.bands)[lay.chips], nb)
-    gain = np.einsum("nb,nb->b", read, sent) / np.maximum(np.einsum("nb,nb->b", sent, sent), 1e-30)
-    return gain, np.sum((read - gain * sent) ** 2, axis=0) / np.maximum(var.sum(0), 1e-30)
+    gain, resid = _band_fit(read, sent)
+    return gain, np.sum(resid ** 2, axis=0) / np.maximum(var.sum(0), 1e-30)
 
 
 def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarray,
@@ -392,8 +393,7 @@ def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarr
 
     shape = per_band(q[p] * w[p]) * (lay.pilot_amp * lay.pilot_signs)[:, None]   # a pilot's value per band
     read = per_band(q[p] * chips[p])
-    gain = np.einsum("nb,nb->b", read, shape) / np.maximum(np.einsum("nb,nb->b", shape, shape), 1e-30)
-    resid = read - gain * shape
+    gain, resid = _band_fit(read, shape)
     cov = resid.T @ resid / PILOTS
     cov += np.eye(nb) * 1e-3 * np.trace(cov) / nb          # a little shrinkage: 256 pilots, nb x nb
     beta = np.linalg.solve(cov, gain * np.abs(shape).mean(0))
@@ -423,11 +423,11 @@ class Reading:
 
 
 def restore(read: np.ndarray, factor: np.ndarray, res: int, channels: int,
-            strength: float = 1.0, codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, Reading]:
+            strength: float = 1.0) -> tuple[np.ndarray, Reading]:
     """Carrier readings (N,) and their relative noise powers (N,) (`despread`) -> planes (3, C, R, R)
     float32 (the MMSE estimate, not clipped) and the pilots' `Reading` (gain; noise per carrier of average
     noise factor)."""
-    return restore_layout(print_layout(res, channels, codec), read, factor, strength)
+    return restore_layout(print_layout(res, channels), read, factor, strength)
 
 
 def restore_layout(lay: PrintLayout, read: np.ndarray, factor: np.ndarray,

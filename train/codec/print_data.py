@@ -91,7 +91,7 @@ def make_capture(host_spec: str, seed: int, cfg: CaptureConfig = CaptureConfig()
     host = _host(host_spec, rng)
     planes = print_layout.random_planes(res, ch, rng)
     target_db = float(rng.uniform(cfg.host_psnr_min, cfg.host_psnr_max))
-    snap = print_layout.embed(host, planes, target_db, codec="print-1")   # the front-end learns print-1's bands
+    snap = print_layout.embed(host, planes, target_db)
     severity = str(rng.choice(_SEVERITIES, p=_SEVERITY_P))
     dots = int(rng.choice(_DOTS))
     preset = PRESETS[severity]
