@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from . import __version__
+from .formats import FILE_REFINE_STEPS
 from .errors import UserError
 from .lazy import lazy_command as _run
 from .options import add_dataclass_options
@@ -109,9 +110,9 @@ def _codec_parsers(sub) -> None:
     e.add_argument("--strength", type=float, default=1.0, help="embedding strength: more survives more, shows more "
                                                                "(print: the host fidelity falls 20 log10(strength) dB)")
     e.add_argument("--jpeg-quality", type=int, default=95, help="quality when writing .jpg")
-    e.add_argument("--refine", type=int, default=100,
+    e.add_argument("--refine", type=int, default=FILE_REFINE_STEPS,
                    help="file medium: embed-time refinement steps against the restore network (0: the network's "
-                        "snapshot as is; more: better restores from the file and JPEG copies, about 0.4 s a step "
+                        "snapshot as is; more: better restores from the file and JPEG copies, about 0.25 s a step "
                         "on 2 cores)")
     e.add_argument("--report", help="write a JSON report here (host_psnr, host_ssim, embed_ms)")
 
@@ -163,7 +164,7 @@ def _codec_parsers(sub) -> None:
     mx.add_argument("--host", default="builtin:chelsea", help=_hosts_help())
     mx.add_argument("--severity", default="moderate", choices=SEVERITY_NAMES, help="simulated capture severity")
     mx.add_argument("--seed", type=int, default=0, help="random seed of the simulated capture")
-    mx.add_argument("--refine", type=int, default=100, help="file medium: embed-time refinement steps (as embed "
+    mx.add_argument("--refine", type=int, default=FILE_REFINE_STEPS, help="file medium: embed-time refinement steps (as embed "
                                                            "--refine)")
 
 

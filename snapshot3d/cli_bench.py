@@ -2,6 +2,7 @@
 live in `snapshot3d.bench` and are imported when a command runs (the product never imports them)."""
 from __future__ import annotations
 
+from .formats import FILE_REFINE_STEPS
 from .lazy import lazy_command as _run
 
 __all__ = ["add_bench_commands"]
@@ -127,7 +128,7 @@ def add_bench_commands(bsub, add) -> None:
     bc.add_argument("--seeds", type=int, default=None, help="simulated photos per physical severity (default: file 3, "
                                                              "print 6)")
     bc.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
-    bc.add_argument("--refine", type=int, default=100, help="embed-time refinement steps of the ours-refined rows "
+    bc.add_argument("--refine", type=int, default=FILE_REFINE_STEPS, help="embed-time refinement steps of the ours-refined rows "
                                                            "and the side-by-side figure (0: neither)")
     bc.add_argument("--strengths", default=None, help="embedding strengths of the trade-off sweep (default: file "
                                                       "0.5,0.75,1,1.5,2; print 0.5,0.71,1,1.41,2)")
@@ -150,7 +151,7 @@ def add_bench_commands(bsub, add) -> None:
              _run("snapshot3d.bench.codec_jpeg", "bench_codec_jpeg_command"))
     _out(bj)
     bj.add_argument("--compare", default=None, help="another codec weights file measured beside the shipped one")
-    bj.add_argument("--refine", type=int, default=100, help="also the shipped codec's snapshots refined this many "
+    bj.add_argument("--refine", type=int, default=FILE_REFINE_STEPS, help="also the shipped codec's snapshots refined this many "
                                                            "steps at embed time (0: not); the sharing part's snapshots "
                                                            "are refined this many steps")
     bj.add_argument("--part", default="all", choices=("all", "sharing", "distortions"),

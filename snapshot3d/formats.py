@@ -100,6 +100,7 @@ DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is as
 # interpolation, so that restoring a texel averages over about (CODEC_GRID / R)^2 grid cells. A codec carries planes up to
 # CODEC_MAX_RES x CODEC_MAX_RES with at most CODEC_CHANNELS channels; fewer channels are zero-padded.
 FILE_CODEC = "hinet-1"        # id of the file medium's codec (weights, ONNX and QR name it)
+FILE_REFINE_STEPS = 70        # embed-time refinement steps of a file snapshot (`embed --refine`'s default)
 CODEC_CHANNELS = 8            # plane channels the secret has room for (3 planes -> 24 secret channels)
 CODEC_MAX_RES = 64            # largest plane resolution the codec carries
 CODEC_LEVELS = 2              # Haar splits of the shipped codec (its weights file stores its own config)

@@ -123,7 +123,7 @@ def test_version_and_help_show_every_default():
     embed_help = build_parser().parse_args(["embed", "x.s3d", "-o", "y.png"])  # parses; hosts listed in help
     assert embed_help.host == "builtin:coffee"
     proc = run("embed", "--help")
-    assert "builtin:NAME" in proc.stdout and "chelsea" in proc.stdout and "(default: 100)" in proc.stdout
+    assert "builtin:NAME" in proc.stdout and "chelsea" in proc.stdout and f"(default: {formats.FILE_REFINE_STEPS})" in proc.stdout
 
 
 def test_export_and_make_example_need_a_destination(tmp_path):

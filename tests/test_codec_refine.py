@@ -1,5 +1,5 @@
-"""Embed-time refinement: at about the same host fidelity, the frozen restore network reads the planes
-back better from the snapshot file and from a JPEG-75 copy."""
+"""Embed-time refinement: at the same host fidelity (a hard constraint), the frozen restore network reads
+the planes back better from the snapshot file and from a JPEG-75 copy."""
 import cv2
 import numpy as np
 import pytest
@@ -28,14 +28,17 @@ def _jpeg75(rgb: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
 
-def test_refined_snapshot_restores_better_at_about_the_same_host(setup):
+def test_refined_snapshot_restores_better_at_the_same_host(setup):
     net, scene, host = setup
     plain = embed_planes(net, host, scene.planes())
     refined, info = refine_snapshot(net, host, scene.planes(), 25)
     assert refined.shape == plain.shape and refined.dtype == np.uint8
-    assert psnr(refined / 255, host) >= psnr(plain / 255, host) - 0.6  # measured -0.4 dB after 25 steps
+    # the projection holds the host where the unrefined snapshot left it (measured 32.831 -> 32.827 dB; 8-bit
+    # rounding moves it by a few thousandths); the Lagrange weight it replaced let it fall 0.4 dB in 25 steps
+    assert psnr(refined / 255, host) >= psnr(plain / 255, host) - 0.05
+    assert abs(info["host_psnr_unrefined"] - psnr(plain / 255, host)) < 0.05
     assert info["plane_mse_last"] < info["plane_mse_first"]
-    # measured (coffee, 25 steps): file 22.8 -> 30.4 dB, JPEG-75 copy 15.6 -> 16.4 dB
+    # measured (coffee, 25 steps): file 22.8 -> 29.2 dB, JPEG-75 copy 15.8 -> 16.4 dB
     assert _plane_psnr(net, scene, refined) >= _plane_psnr(net, scene, plain) + 4.0
     assert _plane_psnr(net, scene, _jpeg75(refined)) >= _plane_psnr(net, scene, _jpeg75(plain)) + 0.3
 
