@@ -163,6 +163,19 @@ def add_bench_commands(bsub, add) -> None:
                     help="sharing part: scene files beside the bundled spot (comma-separated)")
     _quick(bj, refine=5, hosts="coffee", heldout=0, scenes="")
 
+    br = add(bsub, "refine", "embed-time refinement of file snapshots: restore_psnr of the PNG, a JPEG-75 and a 256-px "
+                             "copy (read with no text) against refinement time, per schedule and step count",
+             _run("snapshot3d.bench.refine", "bench_refine_command"))
+    _out(br)
+    br.add_argument("--steps", default="0,20,40,70,100,140", help="step counts of the shipped schedule (turns)")
+    br.add_argument("--former", type=int, default=100, help="steps of the former schedule (both copies every step, "
+                                                            "host weighted) measured beside it (0: not)")
+    br.add_argument("--scenes", default="snapshot3d/assets/spot.s3d,bench/models/lego-print.s3d",
+                    help="comma-separated scene files")
+    br.add_argument("--hosts", default="coffee", help="bundled host photos")
+    br.add_argument("--heldout", type=int, default=1, help="also this many held-out host photos (../shared)")
+    _quick(br, steps="0,2", former=2, hosts="coffee", heldout=0, scenes="snapshot3d/assets/spot.s3d")
+
     bq = add(bsub, "capacity", "the capture channel's Gaussian capacity per severity and the best restore_psnr "
                                "it allows, beside the shipped codec's, per plane size",
              _run("snapshot3d.bench.capacity", "bench_capacity_command"))

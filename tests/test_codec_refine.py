@@ -3,6 +3,7 @@ the planes back better from the snapshot file and from a JPEG-75 copy."""
 import cv2
 import numpy as np
 import pytest
+from helpers import assert_one_line_error, run_cli
 
 from snapshot3d import codec_layout
 from snapshot3d.metrics import psnr
@@ -50,3 +51,17 @@ def test_negative_refine_is_refused(setup):
     net, scene, host = setup
     with pytest.raises(UserError, match="--refine must be >= 0"):
         snapshot_of(net, host, scene.planes(), -1)
+
+
+def test_unknown_schedule_is_refused(setup):
+    net, scene, host = setup
+    with pytest.raises(ValueError, match="unknown refinement schedule 'bogus'; choose from turns, both-weighted"):
+        refine_snapshot(net, host, scene.planes(), 1, schedule="bogus")
+
+
+@pytest.mark.parametrize("args,match", [(["--steps", "bogus"], "--steps takes comma-separated step counts"),
+                                        (["--steps", "-3"], "step counts are >= 0"),
+                                        (["--scenes", "nowhere.s3d"], "no scene file nowhere.s3d")])
+def test_bench_refine_bad_options_get_one_line(tmp_path, args, match):
+    assert_one_line_error(run_cli("bench", "refine", "--out", str(tmp_path), *args), match)
+    assert not list(tmp_path.iterdir())

@@ -33,11 +33,17 @@ from .hinet import embed_planes, secret_grid
 from .net import CodecNet
 from .training import secret_to_planes_t
 
-__all__ = ["refine_snapshot", "snapshot_of", "REFINE_CHANNEL"]
+__all__ = ["refine_snapshot", "snapshot_of", "REFINE_CHANNEL", "SCHEDULES"]
 
 # JPEG only, quality in [65, 95] at level 1 (level 0: the 8-bit file alone)
 REFINE_CHANNEL = ChannelRanges(shift_px=0.0, blur_px=0.0, gain=0.0, offset=0.0, gamma=0.0, saturation=0.0,
                                shading=0.0, texture=0.0, noise=0.0, jpeg_min=65.0, jpeg_prob=1.0)
+
+
+SCHEDULES = {"turns": 3e-3, "both-weighted": 2e-3}
+"""refinement schedules and their learning rates: `turns` (shipped) restores one copy per step, the file and a
+JPEG in turn, and holds the host by projection; `both-weighted` (the former one, kept for `bench refine`)
+restores both copies every step and weighs the host term by a steered Lagrange multiplier"""
 
 
 def _psnr(mse: float) -> float:
@@ -54,9 +60,12 @@ def _project(x0: torch.Tensor, delta: torch.Tensor, host: torch.Tensor, budget: 
 
 
 def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: int, strength: float = 1.0,
-                    lr: float = 3e-3, seed: int = 0, on_step=None) -> tuple[np.ndarray, dict]:
+                    lr: float | None = None, seed: int = 0, on_step=None, schedule: str = "turns"
+                    ) -> tuple[np.ndarray, dict]:
     """-> (snapshot (380, 380, 3) uint8 RGB, {"host_psnr_unrefined", "plane_mse_first", "plane_mse_last"}).
-    `on_step(i)` is called after each step (progress)."""
+    `schedule` one of SCHEDULES (lr None: its own); `on_step(i)` is called after each step (progress)."""
+    if schedule not in SCHEDULES:
+        raise ValueError(f"unknown refinement schedule {schedule!r}; choose from {', '.join(SCHEDULES)}")
     _, c, r, _ = planes.shape
     h = torch.from_numpy(np.ascontiguousarray(host.transpose(2, 0, 1), np.float32))[None]
     target_planes = torch.from_numpy(np.ascontiguousarray(planes, np.float32))
@@ -66,18 +75,24 @@ def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: 
     budget = F.mse_loss(x0, h).item()
     target_db = _psnr(budget)
     delta = torch.zeros_like(x0, requires_grad=True)
-    opt = torch.optim.Adam([delta], lr=lr)
+    opt = torch.optim.Adam([delta], lr=lr or SCHEDULES[schedule])
     gen = torch.Generator().manual_seed(seed)
-    losses = []
+    weighted, log_w, losses = schedule == "both-weighted", math.log(10.0), []
     for i in range(steps):
-        level = torch.tensor([float(i % 2)])   # the 8-bit file, then a JPEG copy, in turn
-        seen = apply_channel((x0 + delta).clamp(0, 1), level, REFINE_CHANNEL, gen)
-        loss = F.mse_loss(secret_to_planes_t(net.reverse(seen)[1][0] / strength, r, c), target_planes)
+        x = (x0 + delta).clamp(0, 1)
+        levels = torch.tensor([0.0, 1.0]) if weighted else torch.tensor([float(i % 2)])   # the 8-bit file, a JPEG
+        seen = apply_channel(x.expand(len(levels), -1, -1, -1), levels, REFINE_CHANNEL, gen)
+        rest = net.reverse(seen)[1] / strength
+        loss = sum(F.mse_loss(secret_to_planes_t(s, r, c), target_planes) for s in rest) / len(levels)
+        l_host = F.mse_loss(x, h)
         opt.zero_grad(set_to_none=True)
-        loss.backward()
+        (loss + math.exp(log_w) * l_host if weighted else loss).backward()
         opt.step()
-        with torch.no_grad():
-            _project(x0, delta, h, budget)
+        if weighted:
+            log_w = float(np.clip(log_w + 0.1 * np.clip(target_db - _psnr(l_host.item()), -5, 5), -2.0, 10.0))
+        else:
+            with torch.no_grad():
+                _project(x0, delta, h, budget)
         losses.append(loss.item())
         if on_step is not None:
             on_step(len(losses))
