@@ -11,6 +11,7 @@ this machine), `host_psnr` (against the unmarked host), `restore_psnr` of each c
 summary has medians per schedule and step count; the chart puts `restore_psnr` against `refine_s`."""
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -85,8 +86,6 @@ def _chart(summary: list[dict], path: Path, cores: int) -> None:
 
 
 def bench_refine_command(args) -> int:
-    import os
-
     from .codec_print import heldout_hosts
 
     try:

@@ -7,9 +7,10 @@ Each step restores one copy of the current snapshot through the differentiable c
 (expectation over the draws, as for robust adversarial examples), and takes an Adam step on the plane
 error. The host fidelity is a hard constraint: after every step the snapshot's difference from the host
 is scaled back onto the unrefined snapshot's mean square, so the host PSNR never falls below the
-unrefined snapshot's (projected gradient). Both copies in every step, with a Lagrange weight on the
-host term, cost twice the time for the same restores, and that weight let the host PSNR drift by up to
-0.6 dB (README "Embed-time refinement"). The restore side is unchanged: any decoder of this codec
+unrefined snapshot's (projected gradient). The former schedule (`both-weighted`: both copies every step,
+a Lagrange weight on the host term) took 2.9 times as long and let the host PSNR fall by up to 0.6 dB;
+held at the same host it restored no better (`snapshot3d bench refine`, README "Embed-time
+refinement"). The restore side is unchanged: any decoder of this codec
 version reads a refined snapshot. Phone photos do not gain (0.2-0.6 dB lower in `bench codec`'s medians):
 drawing the whole training channel did not help them either, their sub-pixel misregistration defeats
 it (README "Embed-time refinement").
