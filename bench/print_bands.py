@@ -19,14 +19,13 @@ import numpy as np
 
 from snapshot3d import bands, formats
 from snapshot3d import print_layout as pl
+from snapshot3d.errors import UserError
 from snapshot3d.metrics import ssim
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import load_scene_file
 
 from .codec_print import capture, heldout_hosts
-from snapshot3d.errors import UserError
-
 from .common import SEVERITIES, ViewJudge, bench_progress, capture_seeds, psnr, pyplot, write_report
 
 __all__ = ["bench_print_bands_command", "CANDIDATES"]

@@ -19,9 +19,7 @@ import numpy as np
 
 from snapshot3d import formats
 from snapshot3d.errors import UserError
-from snapshot3d.scanner import pixelmeta
 from snapshot3d.scanner.backgrounds import load_host
-from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scanner.snapfile import snapshot_in_image
 from snapshot3d.scene import load_scene_file
 from snapshot3d.viewer.media import restore_planes
@@ -36,13 +34,14 @@ COPIES = ("png", "jpeg75", "256 px (0.67x)")
 SIZE = 128
 
 
-def _rows(scene, sname: str, hname: str, host: np.ndarray, judge: ViewJudge, runs: list[tuple[str, int]]) -> list[dict]:
-    from snapshot3d.train.codec.hinet import embed_planes, load_codec
+def _rows(net, scene, sname: str, hname: str, host: np.ndarray, judge: ViewJudge,
+          runs: list[tuple[str, int]]) -> list[dict]:
+    from snapshot3d.train.codec.commands import marked_host
+    from snapshot3d.train.codec.hinet import embed_planes
     from snapshot3d.train.codec.refine import refine_snapshot
 
-    net = load_codec()[0]
     host8 = (np.clip(host, 0, 1) * 255 + 0.5).astype(np.uint8)
-    marked = pixelmeta.mark(host8, scene_meta(scene, formats.FILE_CODEC, 1.0)).astype(np.float32) / 255.0
+    marked = marked_host(host, scene)
     rows = []
     for schedule, steps in runs:
         t = time.perf_counter()
@@ -94,23 +93,27 @@ def bench_refine_command(args) -> int:
         raise UserError(f"--steps takes comma-separated step counts, not {args.steps!r}") from None
     if not steps or min(steps) < 0 or args.former < 0:
         raise UserError("--steps needs at least one step count, and step counts are >= 0")
-    runs = [("none" if n == 0 else "turns", n) for n in steps] + ([("both-weighted", args.former)] if args.former else [])
+    runs = [("none" if n == 0 else "turns", n) for n in steps]
+    runs += [("both-weighted", args.former)] if args.former else []
     scenes = [p for p in args.scenes.split(",") if p]
     missing = [p for p in scenes if not Path(p).is_file()]
     if missing or not scenes:
         raise UserError(f"no scene file {', '.join(missing) or '(none given)'}")
     hosts = {h: load_host("builtin:" + h) for h in args.hosts.split(",") if h}
     hosts.update({Path(p).stem: load_host(p) for p in heldout_hosts(args.heldout)})
-    out, t0, rows = Path(args.out), time.time(), []
+    from snapshot3d.train.codec.hinet import load_codec
+
+    net, out, t0, rows = load_codec()[0], Path(args.out), time.time(), []
     blocks = RowBlocks(out / "refine.partial.jsonl", {"scenes": scenes, "hosts": list(hosts), "runs": runs})
     for path in scenes:
         scene, sname = load_scene_file(path), Path(path).stem
         judge = ViewJudge(scene, SIZE)
         for hname, host in hosts.items():
-            rows += blocks.rows(f"{sname}/{hname}", lambda: _rows(scene, sname, hname, host, judge, runs))
+            rows += blocks.rows(f"{sname}/{hname}", lambda: _rows(net, scene, sname, hname, host, judge, runs))
     summary = _summary(rows)
     write_report(out, "refine", rows, {"scenes": [Path(p).stem for p in scenes], "hosts": list(hosts),
-                                       "view_size": SIZE, "copies": list(COPIES), "shipped_steps": formats.FILE_REFINE_STEPS,
+                                       "view_size": SIZE, "copies": list(COPIES),
+                                       "shipped_steps": formats.FILE_REFINE_STEPS,
                                        "seconds": round(time.time() - t0, 1), "summary": summary})
     _chart(summary, out / "refine.png", os.cpu_count())
     blocks.finish()

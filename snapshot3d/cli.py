@@ -7,8 +7,8 @@ import argparse
 import sys
 
 from . import __version__
-from .formats import FILE_REFINE_STEPS
 from .errors import UserError
+from .formats import FILE_REFINE_STEPS
 from .lazy import lazy_command as _run
 from .options import add_dataclass_options
 

@@ -19,7 +19,8 @@ from snapshot3d.scanner.pixelmeta import mark
 from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import Scene, load_scene_file
 
-__all__ = ["embed_command", "train_codec_command", "train_print_codec_command", "check_planes_for", "snapshot_for"]
+__all__ = ["embed_command", "train_codec_command", "train_print_codec_command", "check_planes_for", "snapshot_for",
+           "marked_host"]
 
 
 def check_planes_for(medium: str, scene: Scene) -> None:
@@ -31,6 +32,13 @@ def check_planes_for(medium: str, scene: Scene) -> None:
         raise UserError(f"{e} (medium {medium})") from None
 
 
+def marked_host(host: np.ndarray, scene: Scene, strength: float = 1.0) -> np.ndarray:
+    """A file snapshot's host: `host` ((380, 380, 3) float RGB in [0, 1]) marked with the scene's metadata
+    (`scanner.pixelmeta`, 8-bit), float32 in [0, 1]."""
+    meta = scene_meta(scene, formats.FILE_CODEC, strength)
+    return mark(np.clip(np.asarray(host) * 255 + 0.5, 0, 255).astype(np.uint8), meta).astype(np.float32) / 255.0
+
+
 def snapshot_for(medium: str, host: np.ndarray, scene: Scene, strength: float = 1.0, refine: int = 0,
                  show_progress: bool = False) -> np.ndarray:
     """The snapshot (380, 380, 3) uint8 RGB of `scene` in `host` ((380, 380, 3) float RGB in [0, 1]) for a
@@ -40,8 +48,7 @@ def snapshot_for(medium: str, host: np.ndarray, scene: Scene, strength: float = 
     snapshot's metadata travels in the sheet's QR code (and the file's text)."""
     if medium == "print":
         return print_layout.embed(host, scene.planes(), print_layout.HOST_PSNR - 20 * np.log10(strength))
-    meta = scene_meta(scene, formats.MEDIUM_CODEC[medium], strength)
-    host = mark(np.clip(np.asarray(host) * 255 + 0.5, 0, 255).astype(np.uint8), meta).astype(np.float32) / 255.0
+    host = marked_host(host, scene, strength)
     from .hinet import load_codec
     from .refine import snapshot_of
     return snapshot_of(load_codec()[0], host, scene.planes(), refine, strength, show_progress=show_progress)

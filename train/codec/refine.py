@@ -85,13 +85,15 @@ def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: 
         seen = apply_channel(x.expand(len(levels), -1, -1, -1), levels, REFINE_CHANNEL, gen)
         rest = net.reverse(seen)[1] / strength
         loss = sum(F.mse_loss(secret_to_planes_t(s, r, c), target_planes) for s in rest) / len(levels)
-        l_host = F.mse_loss(x, h)
         opt.zero_grad(set_to_none=True)
-        (loss + math.exp(log_w) * l_host if weighted else loss).backward()
-        opt.step()
         if weighted:
+            l_host = F.mse_loss(x, h)
+            (loss + math.exp(log_w) * l_host).backward()
+            opt.step()
             log_w = float(np.clip(log_w + 0.1 * np.clip(target_db - _psnr(l_host.item()), -5, 5), -2.0, 10.0))
         else:
+            loss.backward()
+            opt.step()
             with torch.no_grad():
                 _project(x0, delta, h, budget)
         losses.append(loss.item())
