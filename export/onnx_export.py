@@ -31,7 +31,7 @@ OPSET = 17
 MODEL_KINDS = ("restore", "project", "field")
 # Each graph's contract, written into the model as its doc string (README "The ONNX models" says the same).
 DOCS = {
-    "restore": "file medium (codec hinet-1). Input snapshot: float32 (1, 3, 380, 380), RGB, NCHW, values in [0, 1] "
+    "restore": "file medium (the codec named by the metadata's codec_id and the file name). Input snapshot: float32 (1, 3, 380, 380), RGB, NCHW, values in [0, 1] "
                "(uint8 / 255). Output secret: float32 (1, 24, 95, 95): plane k's channel c at index 8k + c (planes xy, "
                "xz, yz); divide by the strength in the metadata, then planes = P S P^T per channel with P = pinv(U), U "
                "(95, R) the linear interpolation of R texel centres onto 95 cell centres (snapshot3d/codec_layout.py).",
@@ -89,10 +89,12 @@ def _export(module, args, names_in, names_out, dynamic, path: Path, kind: str, c
     return _finish(buf.getvalue(), path, f"snapshot3d {kind}", kind, codec, out_shapes)
 
 
-def export_restore(codec, path: Path) -> int:
+def export_restore(codec, path: Path, codec_id: str = formats.FILE_CODEC) -> int:
+    """The restore graph of `codec` (a loaded file codec network), its metadata naming `codec_id`."""
     s = formats.SNAPSHOT_SIZE
     x = torch.rand(1, 3, s, s)
-    return _export(RestoreGraph(codec).eval(), (x,), RESTORE_INPUTS, RESTORE_OUTPUTS, None, path, "restore")
+    return _export(RestoreGraph(codec).eval(), (x,), RESTORE_INPUTS, RESTORE_OUTPUTS, None, path, "restore",
+                   codec=codec_id)
 
 
 def export_project(decoder, path: Path) -> int:

@@ -9,7 +9,7 @@ __all__ = [
     "ORBIT_VIEWS", "ORBIT_SIZE", "ORBIT_ELEVATION_DEG", "ORBIT_FOV_DEG", "WORLD_UP", "BACKGROUND",
     "DENSITY_CLAMP", "RENDER_STEPS_PER_BOX", "OCC_RES", "OCC_ALPHA_THRESHOLD", "KB",
     # sheet and scan (issue 3)
-    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "FILE_CODEC", "PRINT_CODEC", "MEDIA", "MEDIUM_CODEC", "CODEC_MEDIUM",
+    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "FILE_CODEC", "FILE_CODECS", "PRINT_CODEC", "MEDIA", "MEDIUM_CODEC", "CODEC_MEDIUM",
     "DEFAULT_MEDIUM", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
     "MARKER_GAP", "MARGIN_X", "MARGIN_Y", "COLUMN_LEFT", "COLUMN_RIGHT", "SHEET_BOX", "MARKER_ORIGINS",
     "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "QR_MAGIC", "QR_SEP", "QR_FIELDS",
@@ -90,8 +90,10 @@ QR_FIELDS = ("version", "codec", "box", "orbit")
 # the sheet's QR code name the codec, and decoding picks it from there (an unknown one is refused).
 PRINT_CODEC = "print-1"       # id of the print medium's codec (`snapshot3d.print_layout` + its restore network)
 MEDIA = ("print", "file")
-MEDIUM_CODEC = {"print": PRINT_CODEC, "file": "hinet-1"}
-CODEC_MEDIUM = {codec: medium for medium, codec in MEDIUM_CODEC.items()}
+FILE_CODEC = "hinet-2"        # id of the file medium's codec that `embed` writes (weights, ONNX and QR name it)
+FILE_CODECS = (FILE_CODEC, "hinet-1")  # the file codecs this build reads (snapshots made before hinet-2 name hinet-1)
+MEDIUM_CODEC = {"print": PRINT_CODEC, "file": FILE_CODEC}
+CODEC_MEDIUM = {PRINT_CODEC: "print", **{codec: "file" for codec in FILE_CODECS}}
 DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is asked for as a file
 
 # --- the file medium's codec (issue 4) ---
@@ -99,7 +101,6 @@ DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is as
 # (CODEC_GRID x CODEC_GRID: SNAPSHOT_SIZE after CODEC_LEVELS Haar splits) by separable linear
 # interpolation, so that restoring a texel averages over about (CODEC_GRID / R)^2 grid cells. A codec carries planes up to
 # CODEC_MAX_RES x CODEC_MAX_RES with at most CODEC_CHANNELS channels; fewer channels are zero-padded.
-FILE_CODEC = "hinet-1"        # id of the file medium's codec (weights, ONNX and QR name it)
 FILE_REFINE_STEPS = 70        # embed-time refinement steps of a file snapshot (`embed --refine`'s default)
 CODEC_CHANNELS = 8            # plane channels the secret has room for (3 planes -> 24 secret channels)
 CODEC_MAX_RES = 64            # largest plane resolution the codec carries

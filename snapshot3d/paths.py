@@ -16,8 +16,8 @@ def asset(name: str = "") -> Path:
     return base / name if name else base
 
 
-def model_file(kind: str) -> str:
-    """File name of an exported model: kind 'restore' (the file medium's restore network; names its codec),
-    'project' or 'field' (name the decoder)."""
-    return {"restore": f"restore-{formats.FILE_CODEC}.onnx",
+def model_file(kind: str, codec: str | None = None) -> str:
+    """File name of an exported model: kind 'restore' (a file medium's restore network; names its codec,
+    default `formats.FILE_CODEC`), 'project' or 'field' (name the decoder)."""
+    return {"restore": f"restore-{codec or formats.FILE_CODEC}.onnx",
             "project": f"project-{formats.DECODER_VERSION}.onnx", "field": f"field-{formats.DECODER_VERSION}.onnx"}[kind]

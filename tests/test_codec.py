@@ -76,6 +76,34 @@ def test_channel_level_zero_is_8bit_only_and_level_one_hurts():
     assert x.grad is not None and float(x.grad.abs().mean()) > 0.1  # differentiable end to end
 
 
+def test_sharing_channel_is_real_jpeg_sized_and_differentiable():
+    """The file codec's sharing channel: level 0 is 8-bit rounding only; at level 1 a JPEG copy costs what
+    OpenCV's JPEG 95..60 (4:2:0) costs the same image, a resized copy comes back at the input's size, and the
+    gradient reaches the input."""
+    import cv2
+
+    from snapshot3d.train.codec.channel import SharingRanges, apply_sharing
+    gen = torch.Generator().manual_seed(0)
+    rng = np.random.default_rng(0)
+    img = cv2.resize(rng.uniform(0, 1, (24, 24, 3)).astype(np.float32), (96, 96), interpolation=cv2.INTER_CUBIC)
+    img = np.clip(img + rng.normal(0, 0.03, img.shape), 0, 1).astype(np.float32)
+    x = torch.from_numpy(img.transpose(2, 0, 1))[None].repeat(6, 1, 1, 1)
+    assert (apply_sharing(x, torch.zeros(6), generator=gen) - x).abs().max() <= 0.5 / 255 + 1e-6
+
+    def rms(a, b):
+        return float(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)))
+    u8 = (img * 255 + 0.5).astype(np.uint8)
+    cv = {q: rms(cv2.imdecode(cv2.imencode(".jpg", u8, [cv2.IMWRITE_JPEG_QUALITY, q])[1], 1) / 255.0, img) for q in (95, 60)}
+    y = apply_sharing(x, torch.ones(6), SharingRanges(jpeg_prob=1.0, twice_prob=0.0, resize_prob=0.0), gen)
+    errs = [rms(y[i].permute(1, 2, 0).numpy(), img) for i in range(6)]
+    assert 0.7 * cv[95] < min(errs) and max(errs) < 1.4 * cv[60], (errs, cv)
+    x.requires_grad_(True)
+    y = apply_sharing(x, torch.ones(6), SharingRanges(resize_prob=1.0), gen)
+    assert y.shape == x.shape and 0.003 < rms(y.detach().numpy(), x.detach().numpy()) < 0.2
+    y.sum().backward()
+    assert float(x.grad.abs().mean()) > 0.1
+
+
 def test_round_8bit_straight_through():
     x = torch.tensor([0.1234, 0.9999, 1.3, -0.2], requires_grad=True)
     y = round_8bit(x)

@@ -11,6 +11,8 @@ import trimesh
 from helpers import assert_one_line_error, run_cli
 from test_torch_free import BLOCKER
 
+from snapshot3d import formats
+
 ASSETS = Path(str(resources.files("snapshot3d") / "assets"))
 PHOTO = ASSETS / "example-photo.jpg"
 
@@ -84,7 +86,7 @@ def test_embed_sheet_simulate_decode_end_to_end(tmp_path):
                        "--size", "64")
     assert proc.returncode == 0, proc.stderr
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
-    assert rep["planes"] == [64, 8] and rep["scan"]["qr"]["codec"] == "hinet-1"
+    assert rep["planes"] == [64, 8] and rep["scan"]["qr"]["codec"] == formats.FILE_CODEC
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.metrics import psnr
     from snapshot3d.scene import load_scene_file

@@ -66,13 +66,19 @@ def test_exported_models_match_torch_on_real_inputs(tmp_path):
 
 
 def test_shipped_models_are_current(tmp_path):
-    """The models inside the package were exported from the shipped weights (same outputs)."""
+    """The models inside the package were exported from the shipped weights (same outputs), the restore graph
+    of every file codec this build reads (older snapshots name older codecs) as well as the current one's."""
+    from snapshot3d.train.codec.hinet import codec_path
     from snapshot3d.viewer.runtime import model_path
-    export_restore(load_codec()[0], tmp_path / "r.onnx")
     x = np.random.default_rng(1).uniform(0, 1, (1, 3, 380, 380)).astype(np.float32)
-    a = ort.InferenceSession(str(model_path("restore"))).run(None, {"snapshot": x})[0]
-    b = ort.InferenceSession(str(tmp_path / "r.onnx")).run(None, {"snapshot": x})[0]
-    assert np.abs(a - b).max() < 1e-4
+    assert formats.FILE_CODEC in formats.FILE_CODECS
+    for codec in formats.FILE_CODECS:
+        export_restore(load_codec(codec_path(codec))[0], tmp_path / "r.onnx", codec)
+        shipped = str(model_path("restore", codec))
+        assert {p.key: p.value for p in onnx.load(shipped).metadata_props}["codec_id"] == codec
+        a = ort.InferenceSession(shipped).run(None, {"snapshot": x})[0]
+        b = ort.InferenceSession(str(tmp_path / "r.onnx")).run(None, {"snapshot": x})[0]
+        assert np.abs(a - b).max() < 1e-4, codec
     project, field = _export_field_models(tmp_path)
     rng = np.random.default_rng(2)
     planes = rng.uniform(-1, 1, (3, formats.C_MAX, 32, 32)).astype(np.float32)

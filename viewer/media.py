@@ -17,9 +17,9 @@ from .runtime import model_path, session
 __all__ = ["restore_planes", "restore_file", "restore_print", "onnx_runner"]
 
 
-def onnx_runner(kind: str):
-    """x (1, 3, 380, 380) float32 -> the model's only output, through onnxruntime (kind as `model_path`)."""
-    sess = session(str(model_path(kind)))
+def onnx_runner(kind: str, codec: str | None = None):
+    """x (1, 3, 380, 380) float32 -> the model's only output, through onnxruntime (kind, codec as `model_path`)."""
+    sess = session(str(model_path(kind, codec)))
     return lambda x: sess.run(None, {"snapshot": np.ascontiguousarray(x, np.float32)})[0]
 
 
@@ -27,9 +27,10 @@ def _nchw(snapshot: np.ndarray) -> np.ndarray:
     return (snapshot.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
 
 
-def restore_file(snapshot: np.ndarray, res: int, channels: int, strength: float = 1.0, run=None) -> np.ndarray:
-    """The file medium: planes from the invertible network's secret."""
-    secret = (run or onnx_runner("restore"))(_nchw(snapshot))[0] / strength
+def restore_file(snapshot: np.ndarray, res: int, channels: int, strength: float = 1.0, run=None,
+                 codec: str = formats.FILE_CODEC) -> np.ndarray:
+    """The file medium: planes from the secret of `codec`'s invertible network (`run` replaces its ONNX graph)."""
+    secret = (run or onnx_runner("restore", codec))(_nchw(snapshot))[0] / strength
     return codec_layout.secret_to_planes(secret, res, channels)
 
 
@@ -55,7 +56,7 @@ def restore_planes(snapshot: np.ndarray, meta, runners: dict | None = None) -> t
     runners = runners or {}
     medium = formats.CODEC_MEDIUM.get(meta.codec)
     if medium == "file":
-        planes, info = restore_file(snapshot, res, channels, meta.strength or 1.0, runners.get("restore")), {}
+        planes, info = restore_file(snapshot, res, channels, meta.strength or 1.0, runners.get("restore"), meta.codec), {}
     elif medium == "print":
         planes, reading = restore_print(snapshot, res, channels, runners.get("restore-print"))
         info = {"plane_rmse_expected": round(reading.plane_rmse, 4), "pilot_gain": round(reading.gain, 4),

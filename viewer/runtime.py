@@ -24,9 +24,10 @@ class FieldModels:
     field: object
 
 
-def model_path(kind: str) -> Path:
-    """kind 'restore', 'project' or 'field' -> the packaged model file."""
-    return asset(model_file(kind))
+def model_path(kind: str, codec: str | None = None) -> Path:
+    """kind 'restore' (of `codec`, default the file medium's current one), 'project' or 'field' -> the
+    packaged model file."""
+    return asset(model_file(kind, codec))
 
 
 def field_models(threads: int | None = None) -> FieldModels:

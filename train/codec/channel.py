@@ -30,10 +30,11 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import kornia
+import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["ChannelRanges", "round_8bit", "apply_channel", "curriculum_level"]
+__all__ = ["ChannelRanges", "SharingRanges", "round_8bit", "apply_channel", "apply_sharing", "curriculum_level"]
 
 
 @dataclass(frozen=True)
@@ -159,3 +160,63 @@ def apply_channel(x: Tensor, level: Tensor, ranges: ChannelRanges = ChannelRange
     y = _texture(y, level, ranges, generator)
     y = _jpeg(y, level, ranges, generator)
     return y.clamp(0, 1)
+
+
+@dataclass(frozen=True)
+class SharingRanges:
+    """What sharing a snapshot *file* does (the `file` medium; no print, no lens), at level t = 1. Per image:
+    8-bit rounding always; with probability `resize_prob` a square resize by a factor drawn log-uniformly in
+    [1 - (1 - resize_min) * t, 1 + (resize_max - 1) * t] (area-like when smaller, bicubic when larger), the
+    JPEG below at that size, and the reader's resize back (bicubic up, area-like down, as
+    `scanner.pixelmeta` does); JPEG (4:2:0, kornia) with probability `jpeg_prob`, quality drawn in
+    [95 - (95 - jpeg_min) * t, 95], a second JPEG after it with probability `twice_prob`."""
+
+    jpeg_min: float = 60.0
+    """lowest JPEG quality (at t = 1)"""
+    jpeg_prob: float = 0.85
+    """probability that an image goes through JPEG"""
+    twice_prob: float = 0.2
+    """probability of a second JPEG (a re-shared copy)"""
+    resize_prob: float = 0.3
+    """probability that an image is resized and back"""
+    resize_min: float = 0.6
+    """smallest resize factor (380 -> 228 px)"""
+    resize_max: float = 2.8
+    """largest resize factor (380 -> 1064 px)"""
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _resize_to(x: Tensor, n: int) -> Tensor:
+    """(1, 3, h, w) -> (1, 3, n, n): area-like (antialiased bilinear) when smaller, bicubic when larger."""
+    if n < x.shape[-1]:
+        return torch.nn.functional.interpolate(x, size=(n, n), mode="bilinear", antialias=True, align_corners=False)
+    return torch.nn.functional.interpolate(x, size=(n, n), mode="bicubic", align_corners=False)
+
+
+def apply_sharing(x: Tensor, level: Tensor, ranges: SharingRanges = SharingRanges(),
+                  generator: torch.Generator | None = None) -> Tensor:
+    """Snapshot (B, 3, H, W) in [0, 1], square -> what `restore` sees of a shared copy of it, resized back to
+    H x W. `level` (B,) in [0, 1]; level 0 leaves only the 8-bit rounding."""
+    y = round_8bit(x)
+    out = []
+    for i in range(y.shape[0]):
+        t, yi, n = float(level[i]), y[i:i + 1], y.shape[-1]
+        u = torch.rand(6, generator=generator).tolist()
+        if t <= 0.05:
+            out.append(yi)
+            continue
+        if u[0] < ranges.resize_prob:
+            lo, hi = np.log(1 - (1 - ranges.resize_min) * t), np.log(1 + (ranges.resize_max - 1) * t)
+            yi = round_8bit(_resize_to(yi, max(16, int(round(n * np.exp(lo + (hi - lo) * u[1]))))))
+        if u[2] < ranges.jpeg_prob:
+            for k, draw in enumerate(u[3:5]):
+                if k and u[5] >= ranges.twice_prob:
+                    break
+                q = torch.tensor([95 - (95 - ranges.jpeg_min) * t * draw], device=x.device)
+                yi = round_8bit(kornia.enhance.jpeg_codec_differentiable(yi.clamp(0, 1), q))
+        if yi.shape[-1] != n:
+            yi = round_8bit(_resize_to(yi, n))
+        out.append(yi)
+    return torch.cat(out).clamp(0, 1)

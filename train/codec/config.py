@@ -31,6 +31,8 @@ class CodecConfig:
     view_weight: float = _f(1.0, "weight of the view loss (rays rendered through the frozen decoder)")
     plane_weight: float = _f(1.0, "weight of the plane loss (unspread secret vs planes)")
     channel: bool = _f(True, "train through the print-and-capture channel (off: the paper's digital setting, 8-bit only)")
+    sharing: bool = _f(False, "train through what sharing a file does (JPEG 60-95 with 4:2:0, once or twice, resizing "
+                              "0.6x-2.8x and back; `channel.SharingRanges`) instead of the print-and-capture channel")
     ramp: float = _f(0.5, "fraction of the run over which the channel level rises from 0 to its maximum")
     jpeg_prob: float = _f(0.6, "probability that a training image goes through JPEG (after the other distortions)")
     init: str = _f("", "codec weights to start from (a fine-tune with the same architecture); empty: random")

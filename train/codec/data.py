@@ -1,7 +1,8 @@
 """Training data of the codec: host photos and scene planes, with augmentation.
 
-Hosts are the photos bundled with scikit-image and matplotlib (`scanner.backgrounds`); planes come from
-fitted scene files. Augmentation: hosts are rescaled, cropped, flipped and colour-jittered; planes
+Hosts are the photos bundled with scikit-image and matplotlib (`scanner.backgrounds`) and, when
+`../shared/data` is present, the photos of its `hosts/train/` (never `hosts/heldout/`), each reduced to a
+shorter side of at most `_HOST_SIDE` pixels; planes come from fitted scene files. Augmentation: hosts are rescaled, cropped, flipped and colour-jittered; planes
 are flipped, rotated, their channels and planes permuted, cropped and resized to another
 resolution, and sometimes cut to fewer channels, so that one codec serves any scene.
 
@@ -18,12 +19,13 @@ import torch
 
 from snapshot3d import codec_layout, formats
 from snapshot3d.images import fit_square
-from snapshot3d.scanner.backgrounds import background_names, load_background
+from snapshot3d.scanner.backgrounds import load_background
 from snapshot3d.scene import Scene, load_scene_file
 
 __all__ = ["CodecData", "load_codec_data", "crop_batch", "full_sample", "augment_planes"]
 
 _RESOLUTIONS = (32, 48, 64)
+_HOST_SIDE = 640
 
 
 @dataclass
@@ -33,10 +35,25 @@ class CodecData:
     scenes: list           # Scene
 
 
+def _load_train_host(spec: str) -> np.ndarray:
+    """'builtin:NAME' or a photo's path -> (H, W, 3) float32 RGB in [0, 1], shorter side <= _HOST_SIDE."""
+    if spec.startswith("builtin:"):
+        img = np.asarray(load_background(spec.split(":", 1)[1]))
+    else:
+        img = cv2.cvtColor(cv2.imread(spec, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    scale = _HOST_SIDE / min(img.shape[:2])
+    if scale < 1:
+        img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    return img.astype(np.float32) / 255.0
+
+
 def load_codec_data(scene_dir: Path, holdout_scenes: set, holdout_hosts: set) -> CodecData:
+    from .print_data import host_sources
+
     scenes = [load_scene_file(p) for p in sorted(Path(scene_dir).glob("*.s3d")) if p.stem not in holdout_scenes]
-    names = [n for n in background_names() if n not in holdout_hosts]
-    hosts = [load_background(n).astype(np.float32) / 255.0 for n in names]
+    specs = [s for s in host_sources() if s.split(":", 1)[-1] not in holdout_hosts and Path(s).stem not in holdout_hosts]
+    names = [s.split(":", 1)[1] if s.startswith("builtin:") else Path(s).stem for s in specs]
+    hosts = [_load_train_host(s) for s in specs]
     if not scenes or not hosts:
         raise ValueError(f"no training scenes in {scene_dir} or no host photos")
     return CodecData(hosts, names, scenes)

@@ -24,7 +24,7 @@ from snapshot3d.train.field.rays import view_rays
 from snapshot3d.train.field.render import occupancy_from_planes, render_rays
 from snapshot3d.train.field.sampler import BoxFrame
 
-from .channel import ChannelRanges, apply_channel, curriculum_level, round_8bit
+from .channel import ChannelRanges, SharingRanges, apply_channel, apply_sharing, curriculum_level, round_8bit
 from .config import CodecConfig
 from .data import CodecData, crop_batch, full_sample
 from .hinet import build_codec, load_codec, save_codec
@@ -74,7 +74,9 @@ def _psnr(mse: float, peak: float = 1.0) -> float:
 
 
 def _channel(snap, level, cfg: CodecConfig, ranges, gen):
-    return apply_channel(snap, level, ranges, gen) if cfg.channel else round_8bit(snap)
+    if not cfg.channel:
+        return round_8bit(snap)
+    return (apply_sharing if cfg.sharing else apply_channel)(snap, level, ranges, gen)
 
 
 def _save_ckpt(path: Path, net, opt, step, logw, gen, rng, cfg, history):
@@ -87,13 +89,15 @@ def _save_ckpt(path: Path, net, opt, step, logw, gen, rng, cfg, history):
 
 def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path | None = None,
                 ranges: ChannelRanges = ChannelRanges(), log=print, device=None) -> dict:
-    """Train (or resume) on `device` (None: the CPU) and write the weights to `out`; returns the run's summary."""
+    """Train (or resume) on `device` (None: the CPU) and write the weights to `out`; returns the run's summary.
+    The channel is `ranges` (print and capture), or `SharingRanges()` with `cfg.sharing`; `cfg.jpeg_prob`
+    replaces either's JPEG probability."""
     torch.manual_seed(cfg.seed)
     dev = torch.device(device or "cpu")
     net = build_codec(cfg)
     if not 0.0 <= cfg.jpeg_prob <= 1.0:
         raise UserError(f"--jpeg-prob must be in [0, 1], got {cfg.jpeg_prob}")
-    ranges = replace(ranges, jpeg_prob=cfg.jpeg_prob)
+    ranges = replace(SharingRanges() if cfg.sharing else ranges, jpeg_prob=cfg.jpeg_prob)
     if cfg.init:
         start, start_cfg = load_codec(Path(cfg.init))
         arch = ("levels", "blocks", "width", "layers", "clamp")
