@@ -104,6 +104,17 @@ def test_sharing_channel_is_real_jpeg_sized_and_differentiable():
     assert float(x.grad.abs().mean()) > 0.1
 
 
+def test_unreadable_training_host_is_named(tmp_path):
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.codec.print_data import host_name, read_host
+    bad = tmp_path / "broken.jpg"
+    bad.write_bytes(b"not a jpeg")
+    with pytest.raises(UserError, match="broken.jpg"):
+        read_host(str(bad))
+    assert host_name(str(bad)) == "broken" and host_name("builtin:coffee") == "coffee"
+    assert read_host("builtin:coffee").dtype == np.uint8
+
+
 def test_round_8bit_straight_through():
     x = torch.tensor([0.1234, 0.9999, 1.3, -0.2], requires_grad=True)
     y = round_8bit(x)

@@ -210,12 +210,10 @@ def apply_sharing(x: Tensor, level: Tensor, ranges: SharingRanges = SharingRange
         if u[0] < ranges.resize_prob:
             lo, hi = np.log(1 - (1 - ranges.resize_min) * t), np.log(1 + (ranges.resize_max - 1) * t)
             yi = round_8bit(_resize_to(yi, max(16, int(round(n * np.exp(lo + (hi - lo) * u[1]))))))
-        if u[2] < ranges.jpeg_prob:
-            for k, draw in enumerate(u[3:5]):
-                if k and u[5] >= ranges.twice_prob:
-                    break
-                q = torch.tensor([95 - (95 - ranges.jpeg_min) * t * draw], device=x.device)
-                yi = round_8bit(kornia.enhance.jpeg_codec_differentiable(yi.clamp(0, 1), q))
+        jpegs = 0 if u[2] >= ranges.jpeg_prob else 2 if u[5] < ranges.twice_prob else 1
+        for draw in u[3:3 + jpegs]:
+            q = torch.tensor([95 - (95 - ranges.jpeg_min) * t * draw], device=x.device)
+            yi = round_8bit(kornia.enhance.jpeg_codec_differentiable(yi.clamp(0, 1), q))
         if yi.shape[-1] != n:
             yi = round_8bit(_resize_to(yi, n))
         out.append(yi)

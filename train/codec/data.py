@@ -2,9 +2,10 @@
 
 Hosts are the photos bundled with scikit-image and matplotlib (`scanner.backgrounds`) and, when
 `../shared/data` is present, the photos of its `hosts/train/` (never `hosts/heldout/`), each reduced to a
-shorter side of at most `_HOST_SIDE` pixels; planes come from fitted scene files. Augmentation: hosts are rescaled, cropped, flipped and colour-jittered; planes
-are flipped, rotated, their channels and planes permuted, cropped and resized to another
-resolution, and sometimes cut to fewer channels, so that one codec serves any scene.
+shorter side of at most `_HOST_SIDE` pixels; planes come from fitted scene files. Augmentation: hosts are
+rescaled, cropped, flipped and colour-jittered; planes are flipped, rotated, their channels and planes
+permuted, cropped and resized to another resolution, and sometimes cut to fewer channels, so that one codec
+serves any scene.
 
 Arrays: hosts (H, W, 3) float32 RGB in [0, 1]; planes (3, C, R, R) float32 in [-1, 1].
 """
@@ -19,7 +20,6 @@ import torch
 
 from snapshot3d import codec_layout, formats
 from snapshot3d.images import fit_square
-from snapshot3d.scanner.backgrounds import load_background
 from snapshot3d.scene import Scene, load_scene_file
 
 __all__ = ["CodecData", "load_codec_data", "crop_batch", "full_sample", "augment_planes"]
@@ -36,11 +36,10 @@ class CodecData:
 
 
 def _load_train_host(spec: str) -> np.ndarray:
-    """'builtin:NAME' or a photo's path -> (H, W, 3) float32 RGB in [0, 1], shorter side <= _HOST_SIDE."""
-    if spec.startswith("builtin:"):
-        img = np.asarray(load_background(spec.split(":", 1)[1]))
-    else:
-        img = cv2.cvtColor(cv2.imread(spec, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    """A `print_data.host_sources` entry -> (H, W, 3) float32 RGB in [0, 1], shorter side <= _HOST_SIDE."""
+    from .print_data import read_host
+
+    img = read_host(spec)
     scale = _HOST_SIDE / min(img.shape[:2])
     if scale < 1:
         img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
@@ -48,11 +47,11 @@ def _load_train_host(spec: str) -> np.ndarray:
 
 
 def load_codec_data(scene_dir: Path, holdout_scenes: set, holdout_hosts: set) -> CodecData:
-    from .print_data import host_sources
+    from .print_data import host_name, host_sources
 
     scenes = [load_scene_file(p) for p in sorted(Path(scene_dir).glob("*.s3d")) if p.stem not in holdout_scenes]
-    specs = [s for s in host_sources() if s.split(":", 1)[-1] not in holdout_hosts and Path(s).stem not in holdout_hosts]
-    names = [s.split(":", 1)[1] if s.startswith("builtin:") else Path(s).stem for s in specs]
+    specs = [s for s in host_sources() if host_name(s) not in holdout_hosts]
+    names = [host_name(s) for s in specs]
     hosts = [_load_train_host(s) for s in specs]
     if not scenes or not hosts:
         raise ValueError(f"no training scenes in {scene_dir} or no host photos")

@@ -25,7 +25,7 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.errors import UserError
 
-__all__ = ["CaptureConfig", "host_sources", "make_capture", "make_captures", "load_captures", "HELD_OUT_HOSTS"]
+__all__ = ["CaptureConfig", "host_sources", "host_name", "read_host", "make_capture", "make_captures", "load_captures", "HELD_OUT_HOSTS"]
 
 HELD_OUT_HOSTS = ("coffee", "chelsea")
 _PLANES = ((32, 4), (24, 4), (48, 4), (64, 8), (16, 4))
@@ -58,14 +58,26 @@ def host_sources() -> list[str]:
     return out
 
 
-def _host(spec: str, rng: np.random.Generator) -> np.ndarray:
-    """A random square crop of a host photo, resized to the snapshot: (380, 380, 3) float32 RGB in [0, 1]."""
+def host_name(spec: str) -> str:
+    """The name of a `host_sources` entry: the bundled photo's name, or the file's stem."""
+    return spec.split(":", 1)[1] if spec.startswith("builtin:") else Path(spec).stem
+
+
+def read_host(spec: str) -> np.ndarray:
+    """A `host_sources` entry -> the whole photo, (H, W, 3) uint8 RGB; UserError naming an unreadable file."""
     from snapshot3d.scanner.backgrounds import load_background
 
     if spec.startswith("builtin:"):
-        img = np.asarray(load_background(spec.split(":", 1)[1]))
-    else:
-        img = cv2.cvtColor(cv2.imread(spec, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        return np.asarray(load_background(spec.split(":", 1)[1]))
+    img = cv2.imread(spec, cv2.IMREAD_COLOR)
+    if img is None:
+        raise UserError(f"cannot read the training host photo {spec} (not an image, or damaged)")
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+def _host(spec: str, rng: np.random.Generator) -> np.ndarray:
+    """A random square crop of a host photo, resized to the snapshot: (380, 380, 3) float32 RGB in [0, 1]."""
+    img = read_host(spec)
     h, w = img.shape[:2]
     side = int(min(h, w) * rng.uniform(0.55, 1.0))
     y0, x0 = rng.integers(0, h - side + 1), rng.integers(0, w - side + 1)
