@@ -153,3 +153,11 @@ def test_embed_refuses_planes_a_medium_cannot_carry(tmp_path):
     assert_one_line_error(run_cli("embed", str(tmp_path / "big.s3d"), "-o", str(tmp_path / "s.png")),
                           "print codec carries planes")
     assert not (tmp_path / "s.png").exists()
+
+
+def test_page_decodes_the_current_file_codec_itself():
+    """The page restores in the browser only snapshots of the codec it names (others go to the server), so its
+    constant must be the file codec `embed` writes now."""
+    import re
+    js = (Path(__file__).resolve().parents[1] / "viewer" / "static" / "local.js").read_text()
+    assert re.findall(r'FILE_CODEC = "([^"]+)"', js) == [formats.FILE_CODEC]
