@@ -17,7 +17,7 @@ __all__ = ["export_command"]
 
 
 def export_command(args) -> int:
-    from .onnx_export import export_all
+    from .onnx_export import export_all, restore_keys
     from .parity import field_parity, restore_parity
 
     out = asset() if args.install else Path(args.output)
@@ -28,10 +28,12 @@ def export_command(args) -> int:
     try:
         models = export_all(stage)
         paths = {k: v["path"] for k, v in models.items()}
-        parity = {"field": field_parity(paths["project"], paths["field"]),
-                  "restore": restore_parity(paths["restore"], paths["project"], paths["field"])}
+        parity = {"field": field_parity(paths["project"], paths["field"])}
+        parity.update({k: restore_parity(paths[k], paths["project"], paths["field"], codec=c)
+                       for k, c in restore_keys().items()})
         print(json.dumps(parity))
-        if parity["field"]["views_max_abs_diff"] > 1e-3 or parity["restore"]["restore_psnr_diff_db"] > 0.05:
+        if parity["field"]["views_max_abs_diff"] > 1e-3 or \
+                any(parity[k]["restore_psnr_diff_db"] > 0.05 for k in restore_keys()):
             raise UserError("ONNX parity check failed: the exported models do not match torch; nothing was written")
         for info in models.values():
             final = out / Path(info["path"]).name

@@ -25,7 +25,7 @@ from .models import (
 )
 
 __all__ = ["OPSET", "MODEL_KINDS", "DOCS", "export_restore", "export_project", "export_field",
-           "export_all", "model_names"]
+           "export_all", "restore_keys"]
 
 OPSET = 17
 MODEL_KINDS = ("restore", "project", "field")
@@ -42,11 +42,6 @@ DOCS = {
              "point in each plane. Outputs density_logit: float32 (M,) (density = exp, clamped at 15); rgb: float32 "
              "(M, 3) in [0, 1].",
 }
-
-
-def model_names() -> dict:
-    """File names of the models (they carry the versions they were made from)."""
-    return {k: model_file(k) for k in MODEL_KINDS}
 
 
 def _metadata(codec: str) -> dict:
@@ -111,17 +106,25 @@ def export_field(decoder, path: Path) -> int:
                    FIELD_OUTPUTS, dynamic, path, "field")
 
 
+def restore_keys() -> dict:
+    """export.json's key of each file codec's restore graph -> codec: 'restore' is the current codec's, the
+    codecs older snapshots name (`formats.FILE_CODECS`) are 'restore-<codec>'."""
+    return {("restore" if c == formats.FILE_CODEC else f"restore-{c}"): c for c in formats.FILE_CODECS}
+
+
 def export_all(out: Path, log=print) -> dict:
-    """Write the models into `out`; returns their paths and sizes."""
-    from snapshot3d.train.codec.hinet import load_codec
+    """Write the models into `out` (the restore graph of every file codec this build reads, and the renderer's
+    two graphs); returns their paths and sizes, keyed as in `restore_keys` and 'project', 'field'."""
+    from snapshot3d.train.codec.hinet import codec_path, load_codec
     from snapshot3d.train.field.decoder import load_decoder
 
     out.mkdir(parents=True, exist_ok=True)
-    names = model_names()
     t0 = time.time()
     decoder = load_decoder()
-    sizes = {"restore": export_restore(load_codec()[0], out / names["restore"]),
-             "project": export_project(decoder, out / names["project"]),
-             "field": export_field(decoder, out / names["field"])}
+    names = {k: model_file("restore", c) for k, c in restore_keys().items()}
+    names.update(project=model_file("project"), field=model_file("field"))
+    sizes = {k: export_restore(load_codec(codec_path(c))[0], out / names[k], c) for k, c in restore_keys().items()}
+    sizes.update(project=export_project(decoder, out / names["project"]),
+                 field=export_field(decoder, out / names["field"]))
     log(f"exported {', '.join(f'{names[k]} ({v / 1e6:.2f} MB)' for k, v in sizes.items())} in {time.time() - t0:.1f} s")
     return {k: {"path": str(out / names[k]), "bytes": v} for k, v in sizes.items()}

@@ -58,19 +58,20 @@ def field_parity(project_path, field_path, size: int = 96) -> dict:
     return {"views_max_abs_diff": float(np.abs(ort_views - torch_views).max())}
 
 
-def restore_parity(restore_path, project_path, field_path, size: int = 96) -> dict:
-    """restore_psnr of spot hidden in a bundled host, restored by torch and by ORT (same renderer)."""
+def restore_parity(restore_path, project_path, field_path, size: int = 96, codec: str = formats.FILE_CODEC) -> dict:
+    """restore_psnr of spot hidden in a bundled host by file codec `codec`, restored by its torch network and by
+    the ORT graph at `restore_path` (same renderer)."""
     from snapshot3d import codec_layout
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.metrics import psnr
     from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scene import dequantize_planes, quantize_planes
-    from snapshot3d.train.codec.hinet import embed_planes, load_codec, restore_secret
+    from snapshot3d.train.codec.hinet import codec_path, embed_planes, load_codec, restore_secret
     from snapshot3d.viewer.render import render_views
     from snapshot3d.viewer.runtime import session
 
     scene = _spot()
-    net, _ = load_codec()
+    net, _ = load_codec(codec_path(codec))
     snap = embed_planes(net, load_host("builtin:coffee"), scene.planes())
     sec_torch = restore_secret(net, snap)
     x = (snap.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]

@@ -28,3 +28,19 @@ def _last_z_mse(data, tmp_path, z_weight: float) -> float:
 def test_z_loss_pulls_the_lost_part_to_the_constant(data, tmp_path):
     free, pulled = _last_z_mse(data, tmp_path, 0.0), _last_z_mse(data, tmp_path, 20.0)
     assert pulled < 0.5 * free, (free, pulled)
+
+
+def test_fine_tune_starts_at_the_host_weight_its_init_ended_with(data, tmp_path):
+    import json
+    import math
+    from snapshot3d.train.codec.training import initial_host_logw
+    first = tmp_path / "first.npz"
+    train_codec(CodecConfig(**{**TINY, "steps": 2}), data, first, log=lambda _: None)
+    assert initial_host_logw(str(first)) == 0.0  # no summary beside it: weight 1, as from scratch
+    first.with_suffix(".json").write_text(json.dumps({"history": [{"host_weight": 20.0}]}))
+    assert math.isclose(initial_host_logw(str(first)), math.log(20.0))
+    run = train_codec(CodecConfig(**{**TINY, "steps": 1, "init": str(first)}), data, tmp_path / "tuned.npz",
+                      log=lambda _: None)
+    assert 20.0 * math.exp(-0.06) < run["history"][-1]["host_weight"] < 20.0 * math.exp(0.06)
+    first.with_suffix(".json").write_text("{not json")
+    assert initial_host_logw(str(first)) == 0.0

@@ -87,3 +87,18 @@ def test_shipped_models_are_current(tmp_path):
     fresh = FieldModels(ort.InferenceSession(str(project)), ort.InferenceSession(str(field)))
     for x, y in zip(grid_field(shipped, planes, 16, cells), grid_field(fresh, planes, 16, cells)):
         assert np.abs(x - y).max() < 1e-4
+
+
+def test_export_writes_the_restore_graph_of_every_file_codec():
+    """`export` remakes the graphs of older codecs too (snapshots that name them still restore), each with its
+    parity checked: the shipped export.json lists them all."""
+    import json
+
+    from snapshot3d.export.onnx_export import restore_keys
+    from snapshot3d.paths import asset, model_file
+    keys = restore_keys()
+    assert sorted(keys.values()) == sorted(formats.FILE_CODECS) and keys["restore"] == formats.FILE_CODEC
+    doc = json.loads(asset("export.json").read_text())
+    for key, codec in keys.items():
+        assert doc["models"][key]["path"] == model_file("restore", codec)
+        assert doc["parity"][key]["restore_psnr_diff_db"] <= 0.05

@@ -161,3 +161,13 @@ def test_page_decodes_the_current_file_codec_itself():
     import re
     js = (Path(__file__).resolve().parents[1] / "viewer" / "static" / "local.js").read_text()
     assert re.findall(r'FILE_CODEC = "([^"]+)"', js) == [formats.FILE_CODEC]
+
+
+def test_every_codec_embed_writes_ships_its_quality_calibration():
+    """A sheet made with any codec `embed` writes decodes with an expected restore_psnr (bench decode
+    writes the lines; a new codec without one would decode with the estimate null)."""
+    from snapshot3d.viewer.quality import quality_estimate
+    for codec in (formats.PRINT_CODEC, formats.FILE_CODEC):
+        q = quality_estimate(codec, pilot_psnr=30.0, plane_rmse=0.1)
+        assert q["restore_psnr_expected_db"] is not None and 10 < q["restore_psnr_expected_db"] < 60, codec
+        assert q["calibration"]["held_out_rmse_db"] < 3.0, codec

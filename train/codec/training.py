@@ -30,7 +30,9 @@ from .data import CodecData, crop_batch, full_sample
 from .hinet import build_codec, load_codec, save_codec
 from .net import haar
 
-__all__ = ["train_codec", "host_loss", "secret_to_planes_t"]
+__all__ = ["train_codec", "host_loss", "secret_to_planes_t", "initial_host_logw"]
+
+LOGW_RANGE = (-4.0, 8.0)  # bounds of the log host-loss weight
 
 
 def host_loss(snap: torch.Tensor, host: torch.Tensor, low_weight: float) -> torch.Tensor:
@@ -87,6 +89,20 @@ def _save_ckpt(path: Path, net, opt, step, logw, gen, rng, cfg, history):
     tmp.replace(path)
 
 
+def initial_host_logw(init: str) -> float:
+    """log of the host-loss weight a run starts with: the weight `init`'s own run ended with (the last
+    `host_weight` in its summary, `<init>.json`), so that a fine-tune keeps its host instead of first
+    trading it away; 0 (weight 1) from scratch or when that summary is missing."""
+    summary = Path(init).with_suffix(".json") if init else None
+    if summary is None or not summary.is_file():
+        return 0.0
+    try:
+        weight = float(json.loads(summary.read_text())["history"][-1]["host_weight"])
+    except (ValueError, KeyError, IndexError, TypeError):
+        return 0.0
+    return float(np.clip(math.log(max(weight, 1e-6)), *LOGW_RANGE))
+
+
 def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path | None = None,
                 ranges: ChannelRanges = ChannelRanges(), log=print, device=None) -> dict:
     """Train (or resume) on `device` (None: the CPU) and write the weights to `out`; returns the run's summary.
@@ -111,7 +127,9 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
     rng = np.random.default_rng(cfg.seed)
     decoder = load_decoder().to(dev)
     views = _Views(decoder)
-    step, logw, history = 0, 0.0, []
+    step, logw, history = 0, initial_host_logw(cfg.init), []
+    if cfg.init:
+        log(f"fine-tune of {cfg.init}: host-loss weight starts at {math.exp(logw):.2f}")
     if checkpoint is not None and checkpoint.is_file():
         ck = torch.load(checkpoint, weights_only=False, map_location=dev)
         if ck["config"] != asdict(cfg):
@@ -155,7 +173,7 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
         torch.nn.utils.clip_grad_norm_(net.parameters(), 1.0)
         opt.step()
         target = cfg.host_target_db - cfg.host_target_ramp_db * (1 - curriculum_level(step, cfg.steps, cfg.ramp))
-        logw = float(np.clip(logw + 0.005 * np.clip(target - rec["host_psnr"], -10, 10), -4.0, 8.0))
+        logw = float(np.clip(logw + 0.005 * np.clip(target - rec["host_psnr"], -10, 10), *LOGW_RANGE))
         step += 1
         window.append(rec)
         if step % 25 == 0 or step == cfg.steps:
