@@ -65,3 +65,23 @@ def test_unknown_schedule_is_refused(setup):
 def test_bench_refine_bad_options_get_one_line(tmp_path, args, match):
     assert_one_line_error(run_cli("bench", "refine", "--out", str(tmp_path), *args), match)
     assert not list(tmp_path.iterdir())
+
+
+def test_refinement_adam_steps_as_torch_adam():
+    """The refinement's own Adam (torch's optimisers import torch._dynamo on first use, 1.8 s of an embed)
+    takes the very steps torch.optim.Adam takes."""
+    import torch
+
+    from snapshot3d.train.codec.refine import Adam
+    gen = torch.Generator().manual_seed(0)
+    a = torch.randn(3, 40, 40, generator=gen).requires_grad_(True)
+    b, start = a.detach().clone().requires_grad_(True), a.detach().clone()
+    target = torch.randn(3, 40, 40, generator=gen)
+    ours, theirs = Adam(a, 3e-3), torch.optim.Adam([b], lr=3e-3)
+    for _ in range(25):
+        for p, opt in ((a, ours), (b, theirs)):
+            opt.zero_grad(set_to_none=True)
+            ((p.sin() - target) ** 2).mean().backward()
+            opt.step()
+    assert float((a.detach() - start).abs().max()) > 0.01  # it moved
+    assert float((a - b).abs().max()) <= 1e-6
