@@ -33,6 +33,7 @@ def test_z_loss_pulls_the_lost_part_to_the_constant(data, tmp_path):
 def test_fine_tune_starts_at_the_host_weight_its_init_ended_with(data, tmp_path):
     import json
     import math
+
     from snapshot3d.train.codec.training import initial_host_logw
     first = tmp_path / "first.npz"
     train_codec(CodecConfig(**{**TINY, "steps": 2}), data, first, log=lambda _: None)
