@@ -88,7 +88,7 @@ def bench_codec_jpeg_command(args) -> int:
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, SIZE, SIZE)
     rows = []
     runs = [("shipped", None, 0), *([(f"shipped, refined {args.refine}", None, args.refine)] if args.refine else []),
-            *([("first stage", args.compare, 0)] if args.compare else [])]
+            *([(f"compare: {Path(args.compare).stem}", args.compare, 0)] if args.compare else [])]
     for label, path, refine in runs:
         net, _ = load_codec(Path(path) if path else None)
         for host in ("coffee", "chelsea"):
