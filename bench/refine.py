@@ -35,41 +35,51 @@ SIZE = 128
 
 
 def _rows(net, scene, sname: str, hname: str, host: np.ndarray, judge: ViewJudge,
-          runs: list[tuple[str, int]]) -> list[dict]:
-    from snapshot3d.train.codec.commands import marked_host
+          runs: list[tuple[str, int, str]]) -> list[dict]:
+    from snapshot3d.train.codec.commands import marked_host, strength_for
     from snapshot3d.train.codec.hinet import embed_planes
     from snapshot3d.train.codec.refine import refine_snapshot
 
     host8 = (np.clip(host, 0, 1) * 255 + 0.5).astype(np.uint8)
-    marked = marked_host(host, scene)
     rows = []
-    for schedule, steps in runs:
+    for schedule, steps, setting in runs:
+        strength = (strength_for("file", host, scene, float(setting[:-3])) if setting.endswith(" dB")
+                    else float(setting[1:]))
+        marked = marked_host(host, scene, strength)
         t = time.perf_counter()
-        snap = (refine_snapshot(net, marked, scene.planes(), steps, schedule=schedule)[0] if steps
-                else embed_planes(net, marked, scene.planes()))
-        row = {"scene": sname, "host": hname, "schedule": schedule, "steps": steps,
+        snap = (refine_snapshot(net, marked, scene.planes(), steps, strength, schedule=schedule)[0] if steps
+                else embed_planes(net, marked, scene.planes(), strength))
+        row = {"scene": sname, "host": hname, "schedule": schedule, "steps": steps, "setting": setting,
+               "strength": strength,
                "refine_s": time.perf_counter() - t, "host_psnr": psnr(snap / 255, host8 / 255)}
         for name in COPIES:
             got = snapshot_in_image("copy", SHARING[name][0](snap, np.random.default_rng(0)), None)
             row[name] = judge.planes_psnr(restore_planes(got[0], got[1])[0]) if got is not None else None
         rows.append(row)
-        print(f"{sname} / {hname} / {schedule} {steps}: {row['refine_s']:.1f} s, host {row['host_psnr']:.2f}, "
+        print(f"{sname} / {hname} / {schedule} {steps} {setting} (x{strength:g}): {row['refine_s']:.1f} s, host {row['host_psnr']:.2f}, "
               + ", ".join(f"{k} {row[k]:.2f}" for k in COPIES if row[k] is not None), flush=True)
     return rows
 
 
 def _summary(rows: list[dict]) -> list[dict]:
-    keys = list(dict.fromkeys((r["schedule"], r["steps"]) for r in rows))
-    return [{"schedule": s, "steps": n, **{k: median([r for r in rows if (r["schedule"], r["steps"]) == (s, n)], k)
-                                          for k in ("refine_s", "host_psnr", *COPIES)}} for s, n in keys]
+    def key(r: dict) -> tuple:
+        return r["schedule"], r["steps"], r.get("setting", "x1")
+
+    return [{"schedule": s, "steps": n, "setting": x, **{k: median([r for r in rows if key(r) == (s, n, x)], k)
+                                                         for k in ("refine_s", "strength", "host_psnr", *COPIES)}}
+            for s, n, x in dict.fromkeys(key(r) for r in rows)]
 
 
 def _chart(summary: list[dict], path: Path, cores: int) -> None:
+    """Top row: restore_psnr against refinement time at strength 1; bottom row (when host fidelity was swept):
+    restore_psnr against host_psnr, unrefined and refined."""
     plt = pyplot()
-    fig, axes = plt.subplots(1, len(COPIES), figsize=(5 * len(COPIES), 4))
-    for ax, copy in zip(axes, COPIES):
+    swept = len({p["setting"] for p in summary}) > 1
+    fig, axes = plt.subplots(1 + swept, len(COPIES), figsize=(5 * len(COPIES), 4 * (1 + swept)), squeeze=False)
+    for ax, copy in zip(axes[0], COPIES):
         for schedule, marker in (("turns", "o-"), ("both-weighted", "s--")):
-            pts = [p for p in summary if p["schedule"] in (schedule, "none") and p[copy] is not None]
+            pts = [p for p in summary if p["schedule"] in (schedule, "none") and p["setting"] == "x1"
+                   and p[copy] is not None]
             if pts:
                 ax.plot([p["refine_s"] for p in pts], [p[copy] for p in pts], marker, label=schedule)
                 for p in pts:
@@ -79,9 +89,38 @@ def _chart(summary: list[dict], path: Path, cores: int) -> None:
         ax.set_ylabel("restore_psnr (dB), median")
         ax.set_title(f"file snapshot, read from: {copy}")
         ax.legend(loc="lower right", fontsize=8)
+    for ax, copy in zip(axes[1] if swept else (), COPIES):
+        for steps, marker in sorted({(p["steps"], "o-" if p["steps"] else "s--") for p in summary
+                                     if p["schedule"] in ("turns", "none")}):
+            pts = sorted((p for p in summary if p["schedule"] in ("turns", "none") and p["steps"] == steps
+                          and p[copy] is not None), key=lambda p: p["host_psnr"])
+            ax.plot([p["host_psnr"] for p in pts], [p[copy] for p in pts], marker, label=f"{steps} steps")
+            for p in pts:
+                ax.annotate(p["setting"], (p["host_psnr"], p[copy]), fontsize=7, xytext=(3, 3),
+                            textcoords="offset points")
+        ax.set_xlabel("host_psnr (dB), median")
+        ax.set_ylabel("restore_psnr (dB), median")
+        ax.set_title(f"host fidelity sweep, read from: {copy}")
+        ax.legend(loc="lower left", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _setting(text: str) -> str:
+    """'0.55' -> 'x0.55' (an embed strength); '38dB' -> '38 dB' (a host fidelity, `embed --host-psnr`)."""
+    t = text.strip()
+    try:
+        value = float(t[:-2] if t.lower().endswith("db") else t)
+    except ValueError:
+        raise UserError(f"--strengths takes comma-separated strengths or host PSNRs (like 38dB), not {t!r}") from None
+    if t.lower().endswith("db"):
+        if not 20 <= value <= 60:
+            raise UserError(f"a host PSNR of --strengths must be in [20, 60] dB, not {t!r}")
+        return f"{value:g} dB"
+    if not 0.05 <= value <= 10:
+        raise UserError(f"--strengths must be in [0.05, 10], not {t!r}")
+    return f"x{value:g}"
 
 
 def bench_refine_command(args) -> int:
@@ -93,8 +132,13 @@ def bench_refine_command(args) -> int:
         raise UserError(f"--steps takes comma-separated step counts, not {args.steps!r}") from None
     if not steps or min(steps) < 0 or args.former < 0:
         raise UserError("--steps needs at least one step count, and step counts are >= 0")
-    runs = [("none" if n == 0 else "turns", n) for n in steps]
-    runs += [("both-weighted", args.former)] if args.former else []
+    settings = [_setting(x) for x in args.strengths.split(",") if x.strip()]
+    if args.strength_steps < 1:
+        raise UserError("--strength-steps must be >= 1")
+    runs = [("none" if n == 0 else "turns", n, "x1") for n in steps]
+    runs += [("both-weighted", args.former, "x1")] if args.former else []
+    runs += [(sched, n, x) for x in settings if x != "x1"
+             for sched, n in (("none", 0), ("turns", args.strength_steps))]
     scenes = [p for p in args.scenes.split(",") if p]
     missing = [p for p in scenes if not Path(p).is_file()]
     if missing or not scenes:

@@ -107,8 +107,12 @@ def _codec_parsers(sub) -> None:
     e.add_argument("--medium", default="print", choices=("print", "file"),
                    help="print: a sheet to print and photograph (its own codec, numpy, about 1 s); file: a snapshot "
                         "file shared digitally (the invertible network, torch)")
-    e.add_argument("--strength", type=float, default=1.0, help="embedding strength: more survives more, shows more "
-                                                               "(print: the host fidelity falls 20 log10(strength) dB)")
+    e.add_argument("--strength", type=float, default=None,
+                   help="embedding strength (default 1): more survives more, shows more (print: the host fidelity "
+                        "falls 20 log10(strength) dB)")
+    e.add_argument("--host-psnr", type=float, default=None,
+                   help="instead of --strength: the host fidelity to keep, in dB (the strength is chosen for this host "
+                        "and scene; e.g. 38, the paper's setting, for a file snapshot)")
     e.add_argument("--jpeg-quality", type=int, default=95, help="quality when writing .jpg")
     e.add_argument("--refine", type=int, default=FILE_REFINE_STEPS,
                    help="file medium: embed-time refinement steps against the restore network (0: the network's "

@@ -174,7 +174,14 @@ def add_bench_commands(bsub, add) -> None:
                     help="comma-separated scene files")
     br.add_argument("--hosts", default="coffee", help="bundled host photos")
     br.add_argument("--heldout", type=int, default=1, help="also this many held-out host photos (../shared)")
-    _quick(br, steps="0,2", former=2, hosts="coffee", heldout=0, scenes="snapshot3d/assets/spot.s3d")
+    br.add_argument("--strengths", default="1",
+                    help="embed strengths or host PSNRs (comma-separated, like 0.55,38dB: `embed --strength` or "
+                         "`--host-psnr`); each besides 1 adds the network's snapshot and one refined with "
+                         "--strength-steps at that setting: restore_psnr against host_psnr")
+    br.add_argument("--strength-steps", type=int, default=FILE_REFINE_STEPS,
+                    help="refinement steps of the strength sweep (default: embed's)")
+    _quick(br, steps="0,2", former=2, hosts="coffee", heldout=0, scenes="snapshot3d/assets/spot.s3d",
+           strengths="1,38dB", strength_steps=2)
 
     bq = add(bsub, "capacity", "the capture channel's Gaussian capacity per severity and the best restore_psnr "
                                "it allows, beside the shipped codec's, per plane size",

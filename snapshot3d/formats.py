@@ -10,7 +10,7 @@ __all__ = [
     "DENSITY_CLAMP", "RENDER_STEPS_PER_BOX", "OCC_RES", "OCC_ALPHA_THRESHOLD", "KB",
     # sheet and scan (issue 3)
     "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "FILE_CODEC", "FILE_CODECS", "PRINT_CODEC", "MEDIA", "MEDIUM_CODEC", "CODEC_MEDIUM",
-    "DEFAULT_MEDIUM", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
+    "MARK_CODECS", "DEFAULT_MEDIUM", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
     "MARKER_GAP", "MARGIN_X", "MARGIN_Y", "COLUMN_LEFT", "COLUMN_RIGHT", "SHEET_BOX", "MARKER_ORIGINS",
     "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "QR_MAGIC", "QR_SEP", "QR_FIELDS",
 ]
@@ -94,6 +94,7 @@ FILE_CODEC = "hinet-2"        # id of the file medium's codec that `embed` write
 FILE_CODECS = (FILE_CODEC, "hinet-1")  # the file codecs this build reads (snapshots made before hinet-2 name hinet-1)
 MEDIUM_CODEC = {"print": PRINT_CODEC, "file": FILE_CODEC}
 CODEC_MEDIUM = {PRINT_CODEC: "print", **{codec: "file" for codec in FILE_CODECS}}
+MARK_CODECS = ("hinet-1", "hinet-2", "print-1")   # a pixel mark's codec byte indexes this (append only, never reorder)
 DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is asked for as a file
 
 # --- the file medium's codec (issue 4) ---

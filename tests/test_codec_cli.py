@@ -53,6 +53,22 @@ def test_embed_restore_round_trip(tmp_path, ext, quality, min_host, min_planes):
     assert _plane_psnr(orig, back) >= min_planes
 
 
+@pytest.mark.parametrize("medium,target", [("file", 38.0), ("print", 36.0)])
+def test_embed_keeps_the_host_fidelity_asked_for(tmp_path, medium, target):
+    """--host-psnr picks the strength for this host and scene (file: the paper's 38 dB, within 0.3 dB over);
+    the snapshot's metadata carries it, so the restore divides by the same strength."""
+    snap, out = tmp_path / "snap.png", tmp_path / "back.s3d"
+    proc = run("embed", str(SPOT), "--medium", medium, "--refine", "0", "--host-psnr", str(target),
+               "--host", "builtin:chelsea", "-o", str(snap), "--report", str(tmp_path / "e.json"))
+    assert proc.returncode == 0, proc.stderr
+    rep = json.loads((tmp_path / "e.json").read_text())
+    assert target <= rep["host_psnr"] <= target + 0.3, rep
+    assert rep["strength"] < 1.0 and f"strength {rep['strength']:g}" in proc.stdout
+    if medium == "file":
+        assert run("restore", str(snap), "-o", str(out)).returncode == 0
+        assert _plane_psnr(load_scene_file(SPOT), load_scene_file(out)) >= 23.0  # measured 25.2 (unrefined, 38.01 dB)
+
+
 def test_embed_refuses_planes_the_codec_cannot_carry(tmp_path):
     scene = Scene(codes=np.zeros((3, 12, 64, 64), np.uint8), box=np.array([[-1] * 3, [1] * 3]), orbit=Orbit(3.0))
     save_scene(scene, tmp_path / "c12.s3d")
@@ -87,4 +103,10 @@ def test_embed_bad_host_and_output(tmp_path):
     assert_one_line_error(run("embed", str(SPOT), "-o", str(tmp_path / "s.bmp")), "cannot write")
     assert_one_line_error(run("embed", str(SPOT), "-o", str(tmp_path / "s.png"), "--strength", "0"), "--strength")
     assert_one_line_error(run("embed", str(SPOT), "-o", str(tmp_path / "s.png"), "--refine", "-1"), "--refine")
+    assert_one_line_error(run("embed", str(SPOT), "-o", str(tmp_path / "s.png"), "--strength", "0.5", "--host-psnr",
+                              "38"), "give --strength or --host-psnr, not both")
+    assert_one_line_error(run("embed", str(SPOT), "-o", str(tmp_path / "s.png"), "--host-psnr", "90"),
+                          "--host-psnr must be in [20, 60] dB")
+    assert_one_line_error(run("embed", str(SPOT), "--medium", "file", "-o", str(tmp_path / "s.png"), "--host-psnr",
+                              "55"), "the file codec keeps at most")
     assert not (tmp_path / "s.png").exists()

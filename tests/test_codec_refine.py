@@ -61,6 +61,9 @@ def test_unknown_schedule_is_refused(setup):
 
 @pytest.mark.parametrize("args,match", [(["--steps", "bogus"], "--steps takes comma-separated step counts"),
                                         (["--steps", "-3"], "step counts are >= 0"),
+                                        (["--strengths", "1,x"], "--strengths takes comma-separated strengths or host PSNRs"),
+                                        (["--strengths", "0.01"], "--strengths must be in [0.05, 10], not '0.01'"),
+                                        (["--strengths", "90dB"], "must be in [20, 60] dB, not '90dB'"),
                                         (["--scenes", "nowhere.s3d"], "no scene file nowhere.s3d")])
 def test_bench_refine_bad_options_get_one_line(tmp_path, args, match):
     assert_one_line_error(run_cli("bench", "refine", "--out", str(tmp_path), *args), match)

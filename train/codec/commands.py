@@ -3,6 +3,7 @@ reports. (`restore` is torch-free and lives in `viewer.commands`.)"""
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -20,7 +21,7 @@ from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import Scene, load_scene_file
 
 __all__ = ["embed_command", "train_codec_command", "train_print_codec_command", "check_planes_for", "snapshot_for",
-           "marked_host"]
+           "marked_host", "strength_for"]
 
 
 def check_planes_for(medium: str, scene: Scene) -> None:
@@ -54,13 +55,70 @@ def snapshot_for(medium: str, host: np.ndarray, scene: Scene, strength: float = 
     return snapshot_of(load_codec()[0], host, scene.planes(), refine, strength, show_progress=show_progress)
 
 
+def _floor_3(x: float) -> float:
+    """`x` > 0 rounded down to three significant digits (a strength the metadata's text carries exactly)."""
+    e = math.floor(math.log10(x)) - 2
+    return float(f"{math.floor(x / 10 ** e + 1e-9) * 10 ** e:.3g}")
+
+
+def strength_for(medium: str, host: np.ndarray, scene: Scene, host_psnr: float, tol_db: float = 0.05,
+                 iters: int = 8) -> float:
+    """The embedding strength, in [0.05, 10] and three significant digits, at which the snapshot of `scene` in
+    `host` ((380, 380, 3) float RGB in [0, 1]) keeps `host_psnr` dB of its host: `print`, exactly (its carriers
+    are scaled to a host fidelity); `file`, the largest at which the network's snapshot (marked; the
+    refinement holds its host fidelity) keeps it to within `tol_db` over, found by regula falsi (Illinois)
+    on the host PSNR against log strength. UserError when no strength keeps it."""
+    if medium == "print":
+        return _floor_3(min(max(10 ** ((print_layout.HOST_PSNR - host_psnr) / 20), 0.05), 10.0))
+    from .hinet import embed_planes, load_codec
+
+    net, host8 = load_codec()[0], np.clip(np.asarray(host) * 255 + 0.5, 0, 255).astype(np.uint8)
+
+    def over(x: float) -> float:   # dB kept over the target at strength exp(x); falls as x grows
+        s = _floor_3(math.exp(x))
+        return psnr(embed_planes(net, marked_host(host, scene, s), scene.planes(), s) / 255.0, host8 / 255.0) - host_psnr
+
+    hi, f_hi = 0.0, over(0.0)                   # strength 1, then halve or double it to bracket the target
+    lo, f_lo = hi, f_hi
+    while f_lo < 0 and lo > math.log(0.05):
+        hi, f_hi = lo, f_lo
+        lo = max(lo - math.log(2), math.log(0.05))
+        f_lo = over(lo)
+    if f_lo < 0:
+        raise UserError(f"the {medium} codec keeps at most {host_psnr + f_lo:.1f} dB of this host (at --strength "
+                        f"0.05), not {host_psnr:g}")
+    while f_hi >= 0 and hi < math.log(10.0):
+        lo, f_lo = hi, f_hi
+        hi = min(hi + math.log(2), math.log(10.0))
+        f_hi = over(hi)
+    if f_hi >= 0:
+        return 10.0
+    side = 0
+    for _ in range(iters):
+        if f_lo < tol_db:
+            break
+        x = hi - f_hi * (hi - lo) / (f_hi - f_lo)
+        f = over(x)
+        if f >= 0:
+            lo, f_lo, f_hi = x, f, f_hi / 2 if side == -1 else f_hi
+            side = -1
+        else:
+            hi, f_hi, f_lo = x, f, f_lo / 2 if side == 1 else f_lo
+            side = 1
+    return _floor_3(math.exp(lo))
+
+
 def embed_command(args) -> int:
     from snapshot3d.scanner.snapfile import write_snapshot
 
     if args.medium not in formats.MEDIA:
         raise UserError(f"--medium must be one of {', '.join(formats.MEDIA)}, not {args.medium!r}")
-    if not 0.05 <= args.strength <= 10:
+    if args.strength is not None and args.host_psnr is not None:
+        raise UserError("give --strength or --host-psnr, not both")
+    if args.strength is not None and not 0.05 <= args.strength <= 10:
         raise UserError("--strength must be in [0.05, 10]")
+    if args.host_psnr is not None and not 20 <= args.host_psnr <= 60:
+        raise UserError("--host-psnr must be in [20, 60] dB")
     if not 0 <= args.refine <= 5000:
         raise UserError("--refine must be in [0, 5000] steps")
     if Path(args.output).suffix.lower() not in (".png", ".jpg", ".jpeg"):
@@ -69,17 +127,20 @@ def embed_command(args) -> int:
     check_planes_for(args.medium, scene)
     host = load_host(args.host)
     t0 = time.perf_counter()
-    snap = snapshot_for(args.medium, host, scene, args.strength, args.refine, show_progress=True)
+    strength = (strength_for(args.medium, host, scene, args.host_psnr) if args.host_psnr is not None
+                else 1.0 if args.strength is None else args.strength)
+    snap = snapshot_for(args.medium, host, scene, strength, args.refine, show_progress=True)
     secs = time.perf_counter() - t0
     codec = formats.MEDIUM_CODEC[args.medium]
-    write_snapshot(args.output, snap, scene_meta(scene, codec, args.strength), jpeg_quality=args.jpeg_quality)
+    write_snapshot(args.output, snap, scene_meta(scene, codec, strength), jpeg_quality=args.jpeg_quality)
     host8 = (host * 255 + 0.5).astype(np.uint8)
     report = {"host_psnr": psnr(snap / 255.0, host8 / 255.0), "host_ssim": ssim(snap / 255.0, host8 / 255.0),
-              "scene_kb": scene.scene_kb, "strength": args.strength, "medium": args.medium, "codec": codec,
+              "scene_kb": scene.scene_kb, "strength": strength, "medium": args.medium, "codec": codec,
               "refine_steps": args.refine if args.medium == "file" else 0, "embed_ms": secs * 1000}
     write_json(args.report, report)
     print(f"wrote {args.output}: {args.medium} medium (codec {codec}), host_psnr {report['host_psnr']:.2f} dB, "
-          f"host_ssim {report['host_ssim']:.4f}, {scene.scene_kb:.1f} kB of planes hidden, {secs:.1f} s")
+          f"host_ssim {report['host_ssim']:.4f}, strength {strength:g}, {scene.scene_kb:.1f} kB of planes hidden, "
+          f"{secs:.1f} s")
     return 0
 
 
