@@ -41,10 +41,11 @@ def _rows(net, scene, sname: str, hname: str, host: np.ndarray, judge: ViewJudge
     from snapshot3d.train.codec.refine import refine_snapshot
 
     host8 = (np.clip(host, 0, 1) * 255 + 0.5).astype(np.uint8)
+    strengths = {x: strength_for("file", host, scene, float(x[:-3])) if x.endswith(" dB") else float(x[1:])
+                 for x in dict.fromkeys(x for _, _, x in runs)}   # each setting's strength, found once
     rows = []
     for schedule, steps, setting in runs:
-        strength = (strength_for("file", host, scene, float(setting[:-3])) if setting.endswith(" dB")
-                    else float(setting[1:]))
+        strength = strengths[setting]
         marked = marked_host(host, scene, strength)
         t = time.perf_counter()
         snap = (refine_snapshot(net, marked, scene.planes(), steps, strength, schedule=schedule)[0] if steps

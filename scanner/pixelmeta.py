@@ -85,7 +85,8 @@ def _values(meta: SheetMeta) -> list:
 
 def _fits_short_frame(meta: SheetMeta) -> bool:
     """Whether FRAME can hold `meta`: its codec in `formats.MARK_CODECS`, every number within float16's range."""
-    nums = [v for f in _values(meta)[:3] + _values(meta)[4:] if f is not None for v in f]
+    box, orbit, target, _, strength = _values(meta)   # the plane size is uint16 in either frame
+    nums = [v for f in (box, orbit, target, strength) if f is not None for v in f]
     return meta.codec in formats.MARK_CODECS and all(np.isfinite(v) and abs(v) < _F16_MAX for v in nums)
 
 
@@ -278,15 +279,17 @@ def find_meta(rgb: np.ndarray, tries: int = 6) -> tuple[SheetMeta, np.ndarray] |
     maps = [cv2.filter2D(luma, cv2.CV_32F, b.astype(np.float32), anchor=(0, 0), borderType=cv2.BORDER_REFLECT_101)
             for b in _code()[0]]                          # (H, W) each: the coefficient of the block at (y, x)
     span = _N * BLOCK
+    offsets = []   # (distance, y0, x0, the marked coefficients there): the snapshot's pixel (y, x) sits at the copy's
+    for dy in range(-m, m + 1):   # (y + dy, x + dx), i.e. padded (y + dy + m, x + dx + m)
+        for dx in range(-m, m + 1):
+            y0, x0 = dy + m, dx + m
+            coefs = np.stack([c[y0:y0 + span:BLOCK, x0:x0 + span:BLOCK] for c in maps], axis=-1).reshape(-1)
+            offsets.append((abs(dy) + abs(dx), y0, x0, coefs.astype(np.float64)))
     for frame in (FRAME, *LEGACY_FRAMES):
         scored = []
-        for dy in range(-m, m + 1):
-            for dx in range(-m, m + 1):
-                # the snapshot's pixel (y, x) sits at the copy's (y + dy, x + dx), i.e. padded (y + dy + m, x + dx + m)
-                y0, x0 = dy + m, dx + m
-                coefs = np.stack([c[y0:y0 + span:BLOCK, x0:x0 + span:BLOCK] for c in maps], axis=-1).reshape(-1)
-                soft = _soft(coefs.astype(np.float64), frame)
-                scored.append((-float(np.mean(np.abs(soft))), abs(dy) + abs(dx), y0, x0, soft))
+        for dist, y0, x0, coefs in offsets:
+            soft = _soft(coefs, frame)
+            scored.append((-float(np.mean(np.abs(soft))), dist, y0, x0, soft))
         for _, _, y0, x0, soft in sorted(scored, key=lambda t: t[:2])[:tries]:
             meta = unpack(np.packbits(viterbi(soft)).tobytes())
             if meta is not None:

@@ -83,8 +83,8 @@ def _project(x0: torch.Tensor, delta: torch.Tensor, host: torch.Tensor, budget: 
 
 
 def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: int, strength: float = 1.0,
-                    lr: float | None = None, seed: int = 0, on_step=None, schedule: str = "turns",
-                    host_psnr: float | None = None) -> tuple[np.ndarray, dict]:
+                    lr: float | None = None, seed: int = 0, on_step=None, schedule: str = "turns"
+                    ) -> tuple[np.ndarray, dict]:
     """-> (snapshot (380, 380, 3) uint8 RGB, {"host_psnr_unrefined", "plane_mse_first", "plane_mse_last"}).
     `schedule` one of SCHEDULES (lr None: its own); `on_step(i)` is called after each step (progress)."""
     if schedule not in SCHEDULES:
@@ -96,12 +96,8 @@ def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: 
     with torch.no_grad():
         x0 = net(h, secret)[0].clamp(0, 1)
     budget = F.mse_loss(x0, h).item()
-    if host_psnr is not None:   # a tighter host fidelity than the network's own: start on its sphere
-        budget = min(budget, 10 ** (-host_psnr / 10))
     target_db = _psnr(budget)
     delta = torch.zeros_like(x0, requires_grad=True)
-    with torch.no_grad():
-        _project(x0, delta, h, budget)
     opt = Adam(delta, lr=lr or SCHEDULES[schedule])
     gen = torch.Generator().manual_seed(seed)
     weighted, log_w, losses = schedule == "both-weighted", math.log(10.0), []
