@@ -39,9 +39,11 @@ def test_refined_snapshot_restores_better_at_the_same_host(setup):
     assert psnr(refined / 255, host) >= psnr(plain / 255, host) - 0.05
     assert abs(info["host_psnr_unrefined"] - psnr(plain / 255, host)) < 0.05
     assert info["plane_mse_last"] < info["plane_mse_first"]
-    # measured (coffee, 25 steps): file 22.8 -> 29.2 dB, JPEG-75 copy 15.8 -> 16.4 dB
-    assert _plane_psnr(net, scene, refined) >= _plane_psnr(net, scene, plain) + 4.0
-    assert _plane_psnr(net, scene, _jpeg75(refined)) >= _plane_psnr(net, scene, _jpeg75(plain)) + 0.3
+    # measured (coffee, 25 steps, learning rate 1e-3): file 24.6 -> 28.7 dB, JPEG-75 copy 15.33 -> 15.61 dB. The
+    # former rate, 3e-3, gained more in 25 steps (JPEG-75 +0.6 dB) but wandered over 70 (bench refine: 1.6 dB
+    # less on the file at strength 1, 4.7 dB less at --host-psnr 38)
+    assert _plane_psnr(net, scene, refined) >= _plane_psnr(net, scene, plain) + 3.5
+    assert _plane_psnr(net, scene, _jpeg75(refined)) >= _plane_psnr(net, scene, _jpeg75(plain)) + 0.2
 
 
 def test_negative_refine_is_refused(setup):

@@ -125,7 +125,11 @@ def test_vectors_are_the_product_path(vectors):
     from snapshot3d.export.conformance import make_vectors
     fresh = make_vectors({k: model_path(k) for k in ("restore", "project", "field")})
     for k, v in vectors.items():
-        if v.dtype.kind == "f":
+        if k == "planes":   # 8-bit planes: a secret value on a rounding boundary may land one step (2/255) over on
+            # another CPU's onnxruntime (measured: 2 of 98304 values on one machine, the secret within 4.9e-4)
+            d = np.abs(fresh[k].astype(np.float32) - v.astype(np.float32))
+            assert d.max() <= 2 / 255 + 1e-6 and np.mean(d > 2e-3) <= 1e-3, (k, d.max(), int((d > 2e-3).sum()))
+        elif v.dtype.kind == "f":
             assert np.allclose(fresh[k].astype(np.float32), v.astype(np.float32), atol=2e-3), k
         else:
             assert np.array_equal(fresh[k], v), k

@@ -41,10 +41,13 @@ REFINE_CHANNEL = ChannelRanges(shift_px=0.0, blur_px=0.0, gain=0.0, offset=0.0, 
                                shading=0.0, texture=0.0, noise=0.0, jpeg_min=65.0, jpeg_prob=1.0)
 
 
-SCHEDULES = {"turns": 3e-3, "both-weighted": 2e-3}
-"""refinement schedules and their learning rates: `turns` (shipped) restores one copy per step, the file and a
-JPEG in turn, and holds the host by projection; `both-weighted` (the former one, kept for `bench refine`)
-restores both copies every step and weighs the host term by a steered Lagrange multiplier"""
+SCHEDULES = {"turns": 1e-3, "both-weighted": 2e-3}
+"""refinement schedules and their learning rates at strength 1: `turns` (shipped) restores one copy per step, the
+file and a JPEG in turn, and holds the host by projection, with a learning rate proportional to the strength
+(the hidden secret's amplitude in the pixels); `both-weighted` (the former one, kept for `bench refine`) restores
+both copies every step and weighs the host term by a steered Lagrange multiplier. The `turns` rate was 3e-3
+at every strength until an ad hoc sweep (README "Embed-time refinement") found 1e-3 best at strength 1 and
+0.5e-3 at `--host-psnr 38` (strengths 0.50-0.68)."""
 
 
 class Adam:
@@ -86,7 +89,8 @@ def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: 
                     lr: float | None = None, seed: int = 0, on_step=None, schedule: str = "turns"
                     ) -> tuple[np.ndarray, dict]:
     """-> (snapshot (380, 380, 3) uint8 RGB, {"host_psnr_unrefined", "plane_mse_first", "plane_mse_last"}).
-    `schedule` one of SCHEDULES (lr None: its own); `on_step(i)` is called after each step (progress)."""
+    `schedule` one of SCHEDULES (lr None: its own, times `strength` for `turns`); `on_step(i)` is called after
+    each step (progress)."""
     if schedule not in SCHEDULES:
         raise ValueError(f"unknown refinement schedule {schedule!r}; choose from {', '.join(SCHEDULES)}")
     _, c, r, _ = planes.shape
@@ -98,7 +102,7 @@ def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: 
     budget = F.mse_loss(x0, h).item()
     target_db = _psnr(budget)
     delta = torch.zeros_like(x0, requires_grad=True)
-    opt = Adam(delta, lr=lr or SCHEDULES[schedule])
+    opt = Adam(delta, lr=lr or SCHEDULES[schedule] * (strength if schedule == "turns" else 1.0))
     gen = torch.Generator().manual_seed(seed)
     weighted, log_w, losses = schedule == "both-weighted", math.log(10.0), []
     for i in range(steps):
