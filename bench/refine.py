@@ -110,17 +110,19 @@ def _chart(summary: list[dict], path: Path, cores: int) -> None:
 
 def _setting(text: str) -> str:
     """'0.55' -> 'x0.55' (an embed strength); '38dB' -> '38 dB' (a host fidelity, `embed --host-psnr`)."""
+    from snapshot3d.train.codec.commands import HOST_PSNRS, STRENGTHS
+
     t = text.strip()
     try:
         value = float(t[:-2] if t.lower().endswith("db") else t)
     except ValueError:
         raise UserError(f"--strengths takes comma-separated strengths or host PSNRs (like 38dB), not {t!r}") from None
     if t.lower().endswith("db"):
-        if not 20 <= value <= 60:
-            raise UserError(f"a host PSNR of --strengths must be in [20, 60] dB, not {t!r}")
+        if not HOST_PSNRS[0] <= value <= HOST_PSNRS[1]:
+            raise UserError("a host PSNR of --strengths must be in [{:g}, {:g}] dB, not {!r}".format(*HOST_PSNRS, t))
         return f"{value:g} dB"
-    if not 0.05 <= value <= 10:
-        raise UserError(f"--strengths must be in [0.05, 10], not {t!r}")
+    if not STRENGTHS[0] <= value <= STRENGTHS[1]:
+        raise UserError("--strengths must be in [{:g}, {:g}], not {!r}".format(*STRENGTHS, t))
     return f"x{value:g}"
 
 

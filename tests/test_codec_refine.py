@@ -32,18 +32,18 @@ def _jpeg75(rgb: np.ndarray) -> np.ndarray:
 def test_refined_snapshot_restores_better_at_the_same_host(setup):
     net, scene, host = setup
     plain = embed_planes(net, host, scene.planes())
-    refined, info = refine_snapshot(net, host, scene.planes(), 25)
+    refined, info = refine_snapshot(net, host, scene.planes(), 40)
     assert refined.shape == plain.shape and refined.dtype == np.uint8
     # the projection holds the host where the unrefined snapshot left it (measured 32.831 -> 32.827 dB; 8-bit
     # rounding moves it by a few thousandths); the Lagrange weight it replaced let it fall 0.4 dB in 25 steps
     assert psnr(refined / 255, host) >= psnr(plain / 255, host) - 0.05
     assert abs(info["host_psnr_unrefined"] - psnr(plain / 255, host)) < 0.05
     assert info["plane_mse_last"] < info["plane_mse_first"]
-    # measured (coffee, 25 steps, learning rate 1e-3): file 24.6 -> 28.7 dB, JPEG-75 copy 15.33 -> 15.61 dB. The
-    # former rate, 3e-3, gained more in 25 steps (JPEG-75 +0.6 dB) but wandered over 70 (bench refine: 1.6 dB
-    # less on the file at strength 1, 4.7 dB less at --host-psnr 38)
-    assert _plane_psnr(net, scene, refined) >= _plane_psnr(net, scene, plain) + 3.5
-    assert _plane_psnr(net, scene, _jpeg75(refined)) >= _plane_psnr(net, scene, _jpeg75(plain)) + 0.2
+    # measured (coffee, learning rate 1e-3): file 24.6 -> 29.3 dB, JPEG-75 copy 15.33 -> 15.68 dB in 40 steps
+    # (25 steps: 28.7 and 15.61). The former rate, 3e-3, gained that in 25 steps but wandered over 70 (bench refine:
+    # 1.6 dB less on the file at strength 1, 4.7 dB less at --host-psnr 38)
+    assert _plane_psnr(net, scene, refined) >= _plane_psnr(net, scene, plain) + 4.0
+    assert _plane_psnr(net, scene, _jpeg75(refined)) >= _plane_psnr(net, scene, _jpeg75(plain)) + 0.3
 
 
 def test_negative_refine_is_refused(setup):

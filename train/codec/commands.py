@@ -21,7 +21,12 @@ from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import Scene, load_scene_file
 
 __all__ = ["embed_command", "train_codec_command", "train_print_codec_command", "check_planes_for", "snapshot_for",
-           "marked_host", "strength_for"]
+           "marked_host", "strength_for", "STRENGTHS", "HOST_PSNRS"]
+
+STRENGTHS = (0.05, 10.0)
+"""the embedding strengths `embed --strength` takes, and `--host-psnr` chooses among"""
+HOST_PSNRS = (20.0, 60.0)
+"""the host fidelities, in dB, `embed --host-psnr` takes"""
 
 
 def check_planes_for(medium: str, scene: Scene) -> None:
@@ -69,7 +74,7 @@ def strength_for(medium: str, host: np.ndarray, scene: Scene, host_psnr: float, 
     refinement holds its host fidelity) keeps it to within `tol_db` over, found by regula falsi (Illinois)
     on the host PSNR against log strength. UserError when no strength keeps it."""
     if medium == "print":
-        return _floor_3(min(max(10 ** ((print_layout.HOST_PSNR - host_psnr) / 20), 0.05), 10.0))
+        return _floor_3(min(max(10 ** ((print_layout.HOST_PSNR - host_psnr) / 20), STRENGTHS[0]), STRENGTHS[1]))
     from .hinet import embed_planes, load_codec
 
     net, host8 = load_codec()[0], np.clip(np.asarray(host) * 255 + 0.5, 0, 255).astype(np.uint8)
@@ -78,21 +83,22 @@ def strength_for(medium: str, host: np.ndarray, scene: Scene, host_psnr: float, 
         s = _floor_3(math.exp(x))
         return psnr(embed_planes(net, marked_host(host, scene, s), scene.planes(), s) / 255.0, host8 / 255.0) - host_psnr
 
+    x_min, x_max = math.log(STRENGTHS[0]), math.log(STRENGTHS[1])
     hi, f_hi = 0.0, over(0.0)                   # strength 1, then halve or double it to bracket the target
     lo, f_lo = hi, f_hi
-    while f_lo < 0 and lo > math.log(0.05):
+    while f_lo < 0 and lo > x_min:
         hi, f_hi = lo, f_lo
-        lo = max(lo - math.log(2), math.log(0.05))
+        lo = max(lo - math.log(2), x_min)
         f_lo = over(lo)
     if f_lo < 0:
         raise UserError(f"the {medium} codec keeps at most {host_psnr + f_lo:.1f} dB of this host (at --strength "
-                        f"0.05), not {host_psnr:g}")
-    while f_hi >= 0 and hi < math.log(10.0):
+                        f"{STRENGTHS[0]:g}), not {host_psnr:g}")
+    while f_hi >= 0 and hi < x_max:
         lo, f_lo = hi, f_hi
-        hi = min(hi + math.log(2), math.log(10.0))
+        hi = min(hi + math.log(2), x_max)
         f_hi = over(hi)
     if f_hi >= 0:
-        return 10.0
+        return STRENGTHS[1]
     side = 0
     for _ in range(iters):
         if f_lo < tol_db:
@@ -115,10 +121,10 @@ def embed_command(args) -> int:
         raise UserError(f"--medium must be one of {', '.join(formats.MEDIA)}, not {args.medium!r}")
     if args.strength is not None and args.host_psnr is not None:
         raise UserError("give --strength or --host-psnr, not both")
-    if args.strength is not None and not 0.05 <= args.strength <= 10:
-        raise UserError("--strength must be in [0.05, 10]")
-    if args.host_psnr is not None and not 20 <= args.host_psnr <= 60:
-        raise UserError("--host-psnr must be in [20, 60] dB")
+    if args.strength is not None and not STRENGTHS[0] <= args.strength <= STRENGTHS[1]:
+        raise UserError("--strength must be in [{:g}, {:g}]".format(*STRENGTHS))
+    if args.host_psnr is not None and not HOST_PSNRS[0] <= args.host_psnr <= HOST_PSNRS[1]:
+        raise UserError("--host-psnr must be in [{:g}, {:g}] dB".format(*HOST_PSNRS))
     if not 0 <= args.refine <= 5000:
         raise UserError("--refine must be in [0, 5000] steps")
     if Path(args.output).suffix.lower() not in (".png", ".jpg", ".jpeg"):
