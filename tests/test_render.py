@@ -11,8 +11,8 @@ from snapshot3d.cameras import orbit_cameras
 from snapshot3d.metrics import psnr
 from snapshot3d.scene import load_scene_file
 from snapshot3d.viewer.bake import (
+    MAX_RES,
     Baked,
-    _atlas,
     bake_field,
     dilate3,
     erode3,
@@ -53,8 +53,7 @@ def test_baked_grid_reads_back_exactly_and_interpolates_linearly():
     rng = np.random.default_rng(0)
     b = 16
     grid = rng.normal(size=(b, b, b, 4)).astype(np.float32)
-    cols = 4
-    baked = Baked(_atlas(grid, cols), grid, b, cols, np.zeros((b // 2,) * 3, np.float32), 0)
+    baked = Baked(grid, np.zeros((b // 2,) * 3, np.float32), 0)
     cells = rng.integers(0, b, (50, 3)).astype(np.float32)
     logit, rgb = sample_baked(baked, *(cells[:, k:k + 1] for k in range(3)))
     want = grid[tuple(cells.astype(int).T)]
@@ -65,6 +64,27 @@ def test_baked_grid_reads_back_exactly_and_interpolates_linearly():
     logit, _ = sample_baked(baked, *(mid[:, k:k + 1] for k in range(3)))
     lo, hi = grid[tuple(np.floor(mid).astype(int).T)], grid[tuple((np.floor(mid) + [0, 0, 1]).astype(int).T)]
     np.testing.assert_allclose(logit[:, 0], (lo[:, 0] + hi[:, 0]) / 2, atol=1e-4)
+    xy = cells.copy()
+    xy[:, :2] = np.minimum(xy[:, :2], b - 2) + 0.25  # inside one tile, between four cells
+    logit, _ = sample_baked(baked, *(xy[:, k:k + 1] for k in range(3)))
+    i, j, k = np.floor(xy).astype(int).T
+    want = sum(wx * wy * grid[i + dx, j + dy, k, 0] for dx, wx in ((0, 0.75), (1, 0.25)) for dy, wy in ((0, 0.75), (1, 0.25)))
+    np.testing.assert_allclose(logit[:, 0], want, atol=1e-4)
+    edge = np.array([[-1.0, -0.5, b - 0.5], [b, 3, -1], [2, b - 0.5, b]], np.float32)  # up to one cell outside: clamped
+    logit, _ = sample_baked(baked, *(edge[:, k:k + 1] for k in range(3)))
+    clamped = np.clip(np.rint(edge), 0, b - 1).astype(int)
+    np.testing.assert_allclose(logit[:, 0], grid[tuple(clamped.T)][:, 0], atol=1e-5)
+
+
+def test_atlas_holds_the_largest_bake():
+    """OpenCV's maps hold coordinates below 32768: the last slice of a MAX_RES grid still reads right."""
+    b = MAX_RES
+    grid = np.zeros((b, b, b, 4), np.float32)
+    grid[:, :, -1, 0] = np.arange(b, dtype=np.float32)[:, None]
+    baked = Baked(grid, np.zeros((b // 2,) * 3, np.float32), 0)
+    pts = np.array([[b - 1, 5, b - 1], [b - 1.5, 0, b - 1], [3, b - 1, b - 1]], np.float32)
+    logit, _ = sample_baked(baked, *(pts[:, k:k + 1] for k in range(3)))
+    np.testing.assert_allclose(logit[:, 0], [b - 1, b - 1.5, 3], atol=1e-3)
 
 
 def test_interp_matrix_is_bilinear_with_border_clamp():
@@ -92,5 +112,7 @@ def test_bake_refines_only_near_the_surface():
     baked = bake_field(field_models(), pad_planes(scene.planes()), Frame.from_box(scene.box), 64)
     assert baked.grid.shape == (64, 64, 64, 4) and baked.sigma.shape == (32, 32, 32)
     assert 16 ** 3 < baked.evaluated < 0.6 * 64 ** 3
-    with pytest.raises(ValueError, match="multiple of 8"):
+    with pytest.raises(ValueError, match="multiple of 8 from 8 to 176"):
         bake_field(field_models(), pad_planes(scene.planes()), Frame.from_box(scene.box), 60)
+    with pytest.raises(ValueError, match="from 8 to 176"):
+        bake_field(field_models(), pad_planes(scene.planes()), Frame.from_box(scene.box), 184)

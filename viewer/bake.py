@@ -8,9 +8,12 @@ density logit (interpolated, then exp: DVGO's post-activation, which keeps surfa
 (B/4 per axis) finds the occupied cells and the opaque interior, and the fine pass evaluates the
 occupied cells that are not interior; every other cell keeps its coarse value (nearest).
 
-For trilinear reads with OpenCV, the grid is stored as an atlas: z-slice k is a (B, B) tile, rows iy
-and columns ix; `cv2.remap` interpolates inside two adjacent slices (coordinates clamped to the tile,
-so a neighbouring tile is only ever read with weight 0) and numpy blends them."""
+For trilinear reads with OpenCV, the grid is stored as an atlas: the grid padded by one cell on every
+side (edge values, so reads within one cell outside the grid clamp to it), z-slice k a (B + 2, B + 2)
+tile, rows iy and columns ix, the tiles side by side in one row. Slice k + 1 is then always B + 2
+columns right of slice k, so the two reads of a trilinear sample share one map but for a constant;
+`cv2.remap` interpolates inside the two slices and numpy blends them. OpenCV's maps hold coordinates
+below 32768, hence at most `MAX_RES` cells per axis."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -27,23 +30,22 @@ __all__ = ["Baked", "cell_coords", "interp_matrix", "grid_field", "bake_field", 
 
 COARSE = 4          # the coarse pass has B / COARSE cells per axis
 DENSE_ALPHA = 0.5   # a coarse cell is opaque when one reference step through its centre is this opaque
+MAX_RES = 176       # the largest multiple of 8 with (B + 2)^2 atlas columns below 32768
 
 
 @dataclass(frozen=True)
 class Baked:
-    atlas: np.ndarray   # (rows * B, cols * B, 4) float32: density logit, r, g, b
-    grid: np.ndarray    # (B, B, B, 4) float32, the same values indexed [ix, iy, iz]
-    res: int            # B
-    cols: int           # tiles per atlas row
+    grid: np.ndarray    # (B, B, B, 4) float32 [ix, iy, iz]: density logit, r, g, b
     sigma: np.ndarray   # (B/2, B/2, B/2) float32 density at the cell centres of the level below, for the probe
     evaluated: int      # network evaluations the bake took (coarse + fine)
-    tile_x: np.ndarray = field(init=False)  # (B,) float32 atlas column of each z-slice's tile origin
-    tile_y: np.ndarray = field(init=False)  # (B,) float32 atlas row of it
+    atlas: np.ndarray = field(init=False)  # (B + 2, (B + 2)^2, 4) float32, the padded grid (module doc)
 
     def __post_init__(self):  # once per bake, not per read
-        z = np.arange(self.res)
-        object.__setattr__(self, "tile_x", (z % self.cols * self.res).astype(np.float32))
-        object.__setattr__(self, "tile_y", (z // self.cols * self.res).astype(np.float32))
+        object.__setattr__(self, "atlas", _atlas(self.grid))
+
+    @property
+    def res(self) -> int:
+        return self.grid.shape[0]
 
 
 def cell_coords(res: int) -> np.ndarray:
@@ -94,13 +96,11 @@ def erode3(mask: np.ndarray) -> np.ndarray:
     return _neighbourhood(mask, np.logical_and)
 
 
-def _atlas(grid: np.ndarray, cols: int) -> np.ndarray:
-    """(B, B, B, K) [ix, iy, iz] -> the tiled atlas (see the module doc)."""
-    b, k = grid.shape[0], grid.shape[3]
-    rows = -(-b // cols)
-    tiles = np.zeros((rows * cols, b, b, k), np.float32)
-    tiles[:b] = grid.transpose(2, 1, 0, 3)
-    return np.ascontiguousarray(tiles.reshape(rows, cols, b, b, k).transpose(0, 2, 1, 3, 4)).reshape(rows * b, cols * b, k)
+def _atlas(grid: np.ndarray) -> np.ndarray:
+    """(B, B, B, K) [ix, iy, iz] -> (B + 2, (B + 2)^2, K): padded slices side by side (see the module doc)."""
+    b, k = grid.shape[0] + 2, grid.shape[3]
+    padded = np.pad(grid, ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
+    return np.ascontiguousarray(padded.transpose(1, 2, 0, 3)).reshape(b, b * b, k)
 
 
 def _upsample(a: np.ndarray, f: int) -> np.ndarray:
@@ -113,8 +113,8 @@ def _upsample(a: np.ndarray, f: int) -> np.ndarray:
 def bake_field(models, planes12: np.ndarray, frame: Frame, res: int) -> Baked:
     """Bake the field of planes12 (3, C_MAX, R, R) at res^3 (res a multiple of 2 * COARSE) with the
     renderer's graphs (`runtime.FieldModels`)."""
-    if res % (2 * COARSE) or res < 2 * COARSE:
-        raise ValueError(f"bake resolution must be a positive multiple of {2 * COARSE}, got {res}")
+    if res % (2 * COARSE) or not 2 * COARSE <= res <= MAX_RES:
+        raise ValueError(f"bake resolution must be a multiple of {2 * COARSE} from {2 * COARSE} to {MAX_RES}, got {res}")
     nc = res // COARSE
     logit_c, rgb_c = grid_field(models, planes12, nc, np.argwhere(np.ones((nc, nc, nc), bool)))
     alpha = -np.expm1(-np.exp(logit_c) * frame.step).reshape(nc, nc, nc)
@@ -125,26 +125,35 @@ def bake_field(models, planes12: np.ndarray, frame: Frame, res: int) -> Baked:
     grid[fine[:, 0], fine[:, 1], fine[:, 2]] = np.concatenate([logit_f[:, None], rgb_f], 1)
     h = res // 2
     sigma = np.exp(grid[..., 0]).reshape(h, 2, h, 2, h, 2).mean((1, 3, 5), dtype=np.float32)
-    cols = int(np.ceil(np.sqrt(res)))
-    return Baked(_atlas(grid, cols), grid, res, cols, sigma, int(nc ** 3 + len(fine)))
+    return Baked(grid, sigma, int(nc ** 3 + len(fine)))
 
 
 def sample_baked(baked: Baked, gx: np.ndarray, gy: np.ndarray, gz: np.ndarray):
     """Trilinear read at cell coordinates gx, gy, gz (N, S) each (`march.ray_cells`; cell i's centre
-    at i; clamped to the grid; N < 32767, OpenCV's map limit) -> density logit (N, S), rgb (N, S, 3)."""
-    b = baked.res
-    gx, gy, gz = (np.clip(g, 0.0, b - 1, dtype=np.float32) for g in (gx, gy, gz))
-    z0 = np.minimum(gz.astype(np.int32), b - 2)
-    fz = (gz - z0)[..., None]
-    lo = cv2.remap(baked.atlas, baked.tile_x[z0] + gx, baked.tile_y[z0] + gy, cv2.INTER_LINEAR)
-    hi = cv2.remap(baked.atlas, baked.tile_x[z0 + 1] + gx, baked.tile_y[z0 + 1] + gy, cv2.INTER_LINEAR)
-    v = lo + (hi - lo) * fz
+    at i) -> density logit (N, S), rgb (N, S, 3). Coordinates within one cell outside the grid read as
+    clamped to it (the renderer's stay inside the box); N < 32767, OpenCV's map limit."""
+    b = np.float32(baked.res + 2)  # tile width: slice k + 1 starts this many columns right of slice k
+    fz = np.clip(gz, -1.0, baked.res - 1e-3, dtype=np.float32)
+    fz += 1.0                      # the padded slice coordinate
+    mx = np.floor(fz)
+    fz -= mx                       # the weight of the upper slice
+    mx *= b
+    mx += gx
+    mx += 1.0                      # the lower slice's atlas column
+    my = gy + np.float32(1.0)
+    lo = cv2.remap(baked.atlas, mx, my, cv2.INTER_LINEAR)
+    mx += b
+    v = cv2.remap(baked.atlas, mx, my, cv2.INTER_LINEAR)
+    v -= lo
+    v *= fz[..., None]
+    v += lo
     return v[..., 0], v[..., 1:]
 
 
 def sample_points(baked: Baked, unit: np.ndarray, width: int = 1024):
     """sample_baked at any number of points (M, 3) in unit coordinates -> logit (M,), rgb (M, 3)."""
     m = len(unit)
-    cells = np.pad((unit + 1.0) * (0.5 * baked.res) - 0.5, ((0, (-m) % width), (0, 0)))
+    cells = np.clip((unit + 1.0) * (0.5 * baked.res) - 0.5, 0.0, baked.res - 1.0, dtype=np.float32)
+    cells = np.pad(cells, ((0, (-m) % width), (0, 0)))
     logit, rgb = sample_baked(baked, *(cells[:, k].reshape(-1, width) for k in range(3)))
     return logit.reshape(-1)[:m], rgb.reshape(-1, 3)[:m]

@@ -48,19 +48,21 @@ def pad_planes(planes: np.ndarray) -> np.ndarray:
     return out
 
 
-def _tau(logit: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    return np.exp(np.minimum(logit, formats.DENSITY_CLAMP)) * delta
-
-
 def composite(logit: np.ndarray, rgb: np.ndarray, delta: np.ndarray) -> np.ndarray:
     """Volume rendering (DESIGN 1.1) of (N, S) density logits and (N, S, 3) colours with lengths delta
     (N, S) or (N, 1) -> (N, 3) over the white background. Weight i is T_i - T_{i+1} (transmittance
     before and after sample i), which is T_i (1 - exp(-tau_i))."""
-    after = _tau(logit, delta)  # then, in place (one buffer): optical depth, transmittance after each sample
+    after = np.minimum(logit, formats.DENSITY_CLAMP)  # then, in place (one buffer): tau, optical depth,
+    np.exp(after, out=after)                          # transmittance after each sample
+    after *= delta
     np.cumsum(after, axis=1, out=after)
     np.exp(np.negative(after, out=after), out=after)
-    w = -np.diff(after, axis=1, prepend=np.float32(1.0))
-    return np.einsum("ns,nsc->nc", w, rgb) + after[:, -1:] * formats.BACKGROUND
+    w = np.empty_like(after)
+    np.subtract(1.0, after[:, 0], out=w[:, 0])
+    np.subtract(after[:, :-1], after[:, 1:], out=w[:, 1:])
+    out = np.matmul(w[:, None, :], rgb)[:, 0]
+    out += after[:, -1:] * np.float32(formats.BACKGROUND)
+    return out
 
 
 def _baked_colour(baked: Baked, o, d, lo, hi, frame: Frame, samples: int) -> np.ndarray:
