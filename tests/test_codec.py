@@ -34,6 +34,7 @@ def test_codec_net_inverts_with_true_z_float64():
     assert (snap - host).abs().max() > 1e-3
     host_back, secret_back = net.reverse(snap, z)
     assert (host_back - host).abs().max() <= 1e-5 and (secret_back - secret).abs().max() <= 1e-5
+    assert torch.equal(net.reverse_secret(snap), net.reverse(snap)[1])  # the refinement's shortcut
 
 
 @pytest.mark.parametrize("res,ch", [(64, 8), (48, 8), (32, 4)])

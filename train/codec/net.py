@@ -73,8 +73,12 @@ class Coupling(nn.Module):
         return y1, x2 * torch.exp(self._scale(y1)) + self.eta(y1)
 
     def reverse(self, y1: Tensor, y2: Tensor) -> tuple[Tensor, Tensor]:
-        x2 = (y2 - self.eta(y1)) * torch.exp(-self._scale(y1))
+        x2 = self.reverse_secret(y1, y2)
         return y1 - self.phi(x2), x2
+
+    def reverse_secret(self, y1: Tensor, y2: Tensor) -> Tensor:
+        """The secret half of `reverse` alone."""
+        return (y2 - self.eta(y1)) * torch.exp(-self._scale(y1))
 
 
 class CodecNet(nn.Module):
@@ -103,12 +107,23 @@ class CodecNet(nn.Module):
     def reverse(self, snapshot: Tensor, z: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """snapshot (B, 3, H, W) -> host estimate (B, 3, H, W), secret estimate (B, Cs, H/2, W/2).
         `z` defaults to the learned constant (a true z gives an exact inverse, for tests)."""
+        y1, y2 = self._reverse_to_first(snapshot, z)
+        y1, y2 = self.blocks[0].reverse(y1, y2)
+        for _ in range(self.levels):
+            y1 = ihaar(y1)
+        return y1, y2
+
+    def reverse_secret(self, snapshot: Tensor) -> Tensor:
+        """The secret estimate of `reverse` alone: the first block's host half is skipped (one subnet in
+        3 x blocks), for the embed-time refinement."""
+        return self.blocks[0].reverse_secret(*self._reverse_to_first(snapshot, None))
+
+    def _reverse_to_first(self, snapshot: Tensor, z: Tensor | None) -> tuple[Tensor, Tensor]:
+        """`reverse` up to the input of the first block (in the forward order)."""
         y1 = snapshot
         for _ in range(self.levels):
             y1 = haar(y1)
         y2 = self.z.expand(y1.shape[0], -1, y1.shape[2], y1.shape[3]) if z is None else z
-        for blk in reversed(self.blocks):
+        for blk in reversed(self.blocks[1:]):
             y1, y2 = blk.reverse(y1, y2)
-        for _ in range(self.levels):
-            y1 = ihaar(y1)
         return y1, y2

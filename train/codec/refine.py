@@ -2,10 +2,10 @@
 nudge the snapshot's pixels until the frozen restore network reads the planes back better, from the
 snapshot itself and from JPEG copies of it, without moving further from the host.
 
-Each step restores one copy of the current snapshot through the differentiable channel
-(`train.channel`, JPEG only), in turn the 8-bit file itself and a JPEG at a quality drawn in [65, 95]
-(expectation over the draws, as for robust adversarial examples), and takes an Adam step on the plane
-error. The host fidelity is a hard constraint: after every step the snapshot's difference from the host
+Each step restores one copy of the current snapshot, in turn the 8-bit file itself and a JPEG copy
+at a quality drawn in [65, 95] (expectation over the draws, as for robust adversarial examples; the
+copy is `train.codec.jpeg`'s differentiable JPEG as OpenCV writes one), and takes an Adam step on the
+plane error. The host fidelity is a hard constraint: after every step the snapshot's difference from the host
 is scaled back onto the unrefined snapshot's mean square, so the host PSNR never falls below the
 unrefined snapshot's (projected gradient). The former schedule (`both-weighted`: both copies every step,
 a Lagrange weight on the host term) took 2.9 times as long and let the host PSNR fall by up to 0.6 dB;
@@ -25,20 +25,21 @@ import math
 import numpy as np
 import torch
 import torch.nn.functional as F
+from torch import Tensor
 
 from snapshot3d import codec_layout
 from snapshot3d.errors import UserError
 
-from .channel import ChannelRanges, apply_channel
+from .channel import round_8bit
 from .hinet import embed_planes, secret_grid
+from .jpeg import jpeg_420
 from .net import CodecNet
 from .training import secret_to_planes_t
 
-__all__ = ["refine_snapshot", "snapshot_of", "REFINE_CHANNEL", "SCHEDULES", "Adam"]
+__all__ = ["refine_snapshot", "snapshot_of", "copies", "JPEG_QUALITY", "SCHEDULES", "Adam"]
 
-# JPEG only, quality in [65, 95] at level 1 (level 0: the 8-bit file alone)
-REFINE_CHANNEL = ChannelRanges(shift_px=0.0, blur_px=0.0, gain=0.0, offset=0.0, gamma=0.0, saturation=0.0,
-                               shading=0.0, texture=0.0, noise=0.0, jpeg_min=65.0, jpeg_prob=1.0)
+JPEG_QUALITY = (65.0, 95.0)
+"""the range the JPEG copies' quality is drawn from"""
 
 
 SCHEDULES = {"turns": 1e-3, "both-weighted": 2e-3}
@@ -70,6 +71,14 @@ class Adam:
         self.v.mul_(b2).addcmul_(g, g, value=1 - b2)
         denom = (self.v.sqrt() / math.sqrt(1 - b2 ** self.t)).add_(self.eps)
         self.param.addcdiv_(self.m, denom, value=-self.lr / (1 - b1 ** self.t))
+
+
+def copies(x: Tensor, jpeg: tuple[bool, ...], gen: torch.Generator) -> Tensor:
+    """What the restore network reads of snapshot x (1, 3, H, W) in [0, 1]: per entry of `jpeg`, the 8-bit
+    file (False) or a JPEG copy of it at a quality drawn in JPEG_QUALITY (True) -> (len(jpeg), 3, H, W)."""
+    file, (lo, hi) = round_8bit(x), JPEG_QUALITY
+    return torch.cat([jpeg_420(file, lo + (hi - lo) * torch.rand(1, generator=gen)).clamp(0, 1) if j else file
+                      for j in jpeg])
 
 
 def _psnr(mse: float) -> float:
@@ -107,10 +116,8 @@ def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: 
     weighted, log_w, losses = schedule == "both-weighted", math.log(10.0), []
     for i in range(steps):
         x = (x0 + delta).clamp(0, 1)
-        levels = torch.tensor([0.0, 1.0]) if weighted else torch.tensor([float(i % 2)])   # the 8-bit file, a JPEG
-        seen = apply_channel(x.expand(len(levels), -1, -1, -1), levels, REFINE_CHANNEL, gen)
-        rest = net.reverse(seen)[1] / strength
-        loss = sum(F.mse_loss(secret_to_planes_t(s, r, c), target_planes) for s in rest) / len(levels)
+        rest = net.reverse_secret(copies(x, (False, True) if weighted else (bool(i % 2),), gen)) / strength
+        loss = sum(F.mse_loss(secret_to_planes_t(s, r, c), target_planes) for s in rest) / len(rest)
         opt.zero_grad(set_to_none=True)
         if weighted:
             l_host = F.mse_loss(x, h)
