@@ -1,8 +1,8 @@
 """`snapshot3d bench refine`: embed-time refinement of a file snapshot, its time against what a user gets.
 A scene is marked and hidden in a host as `embed --medium file` does it (`scanner.pixelmeta`, then the
 invertible codec), refined N steps by a schedule (`train.codec.refine.SCHEDULES`: the shipped `turns` at
-several step counts, and the former `both-weighted`), and read back as a user would: from the PNG, from a
-JPEG-75 copy and from a 256-px copy, each with no text (metadata from the pixels, `scanner.snapfile`;
+several step counts, and the former `both-weighted`), written as `embed` writes it (`formats.FILE_SCALE`
+times its size) and read back as a user would: from the PNG, from a JPEG-75 copy and from a 256-px copy, each with no text (metadata from the pixels, `scanner.snapfile`;
 restore in onnxruntime, `viewer.media`).
 
 Rows (refine.csv), per scene, host, schedule and step count: `refine_s` (the refinement's wall time on
@@ -20,7 +20,7 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.errors import UserError
 from snapshot3d.scanner.backgrounds import load_host
-from snapshot3d.scanner.snapfile import snapshot_in_image
+from snapshot3d.scanner.snapfile import file_pixels, snapshot_in_image
 from snapshot3d.scene import load_scene_file
 from snapshot3d.viewer.media import restore_planes
 
@@ -29,7 +29,7 @@ from .sharing import SHARING
 
 __all__ = ["bench_refine_command", "COPIES"]
 
-COPIES = ("png", "jpeg75", "256 px (0.67x)")
+COPIES = ("png", "jpeg75", "256 px")
 """the copies each snapshot is read from (`bench.sharing.SHARING` names)"""
 SIZE = 128
 
@@ -54,7 +54,8 @@ def _rows(net, scene, sname: str, hname: str, host: np.ndarray, judge: ViewJudge
                "strength": strength,
                "refine_s": time.perf_counter() - t, "host_psnr": psnr(snap / 255, host8 / 255)}
         for name in COPIES:
-            got = snapshot_in_image("copy", SHARING[name][0](snap, np.random.default_rng(0)), None)
+            got = snapshot_in_image("copy", SHARING[name][0](file_pixels(snap, formats.FILE_SCALE),
+                                                             np.random.default_rng(0)), None)
             row[name] = judge.planes_psnr(restore_planes(got[0], got[1])[0]) if got is not None else None
         rows.append(row)
         print(f"{sname} / {hname} / {schedule} {steps} {setting} (x{strength:g}): {row['refine_s']:.1f} s, host {row['host_psnr']:.2f}, "

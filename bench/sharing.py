@@ -1,8 +1,9 @@
 """`snapshot3d bench codec-jpeg --part sharing`: what sharing does to a file-medium snapshot, end to end.
 A snapshot made as `embed --medium file` makes it (the host marked with its metadata, `scanner.pixelmeta`,
 then the invertible codec, refined `--refine` steps), then one thing a messaging app or a user does to the
-file: JPEG at 60-95 with 4:2:0 chroma, JPEG twice, a square resized (0.67x to 2.8x) and saved as JPEG, a
-few pixels cropped or padded. The copy carries no text; restore reads the metadata from its pixels,
+file as `embed` writes it (`formats.FILE_SCALE` times the snapshot's size, 1520x1520): JPEG at 60-95 with 4:2:0
+chroma, JPEG twice, a square resized (to 256, 380, 512 or 1080 px, 0.67x or 2.8x) and saved as JPEG, a few
+pixels cropped or padded. The copy carries no text; restore reads the metadata from its pixels,
 realigns it and restores with the codec the metadata names (`scanner.snapfile`, `viewer.media`, no torch).
 
 Rows (codec_sharing.csv), per scene, host and distortion (3 seeds for the crops and pads, whose offsets
@@ -10,7 +11,7 @@ are random): `meta_read` (the mark read), `meta_wrong` (read, and not what was w
 `meta_ms`, `restore_psnr` (20 orbit views of the restored planes against the original planes'),
 `host_psnr`/`host_ssim` of the snapshot, and `false_read` on the unmarked host given the same distortion.
 Writes codec_sharing.{csv,json,png} and codec_sharing_side_by_side.png (spot in coffee: the original views,
-then those restored from the PNG, from a JPEG-75 copy and from a 1080-px JPEG-90 copy, none with text)."""
+then those restored from the PNG, from a JPEG-75 copy and from a 256-px JPEG-90 copy, none with text)."""
 from __future__ import annotations
 
 import time
@@ -23,7 +24,7 @@ from snapshot3d import formats
 from snapshot3d.metrics import ssim
 from snapshot3d.scanner import pixelmeta
 from snapshot3d.scanner.qr import scene_meta
-from snapshot3d.scanner.snapfile import snapshot_in_image
+from snapshot3d.scanner.snapfile import file_pixels, snapshot_in_image
 from snapshot3d.scene import load_scene_file
 from snapshot3d.viewer.media import restore_planes
 
@@ -31,7 +32,7 @@ from .common import RowBlocks, ViewJudge, jpeg_copy, median, psnr, pyplot, write
 
 __all__ = ["SHARING", "bench_sharing", "TARGETS"]
 
-TARGETS = {"meta_read": "100% for JPEG >= 60, resized 0.67x-2.8x, 4-px crops", "meta_wrong": 0,
+TARGETS = {"meta_read": "100% for JPEG >= 60, resized 0.67x-2.8x (and to 256 px), 4-px crops", "meta_wrong": 0,
            "lossless restore_psnr": 35, "host_psnr": 38, "jpeg75 restore_psnr": 30, "resize256 restore_psnr": 25}
 
 
@@ -59,10 +60,13 @@ SHARING = {  # name -> (copy(rgb, rng), seeds)
     "jpeg60": (lambda x, r: jpeg_copy(x, 60), 1),
     "jpeg75 twice": (lambda x, r: jpeg_copy(jpeg_copy(x, 75), 75), 1),
     "jpeg85 then 60": (lambda x, r: jpeg_copy(jpeg_copy(x, 85), 60), 1),
-    "256 px (0.67x)": (lambda x, r: _resize(x, 256), 1),
+    "256 px": (lambda x, r: _resize(x, 256), 1),
     "256 px jpeg75": (lambda x, r: _resize(x, 256, 75), 1),
-    "512 px (1.35x)": (lambda x, r: _resize(x, 512), 1),
-    "1080 px (2.8x)": (lambda x, r: _resize(x, 1080), 1),
+    "380 px jpeg75": (lambda x, r: _resize(x, 380, 75), 1),
+    "512 px": (lambda x, r: _resize(x, 512), 1),
+    "1080 px": (lambda x, r: _resize(x, 1080), 1),
+    "0.67x": (lambda x, r: _resize(x, round(0.67 * x.shape[0])), 1),
+    "2.8x": (lambda x, r: _resize(x, round(2.8 * x.shape[0])), 1),
     "crop 2 px": (lambda x, r: _crop(x, 2, r), 3),
     "crop 4 px": (lambda x, r: _crop(x, 4, r), 3),
     "crop 8 px": (lambda x, r: _crop(x, 8, r), 3),
@@ -76,18 +80,19 @@ def _rows(scene, sname: str, hname: str, host: np.ndarray, judge, refine: int) -
     want = pixelmeta.unpack(pixelmeta.pack(scene_meta(scene, formats.FILE_CODEC, 1.0)))
     snap = snapshot_for("file", host, scene, 1.0, refine)
     host8 = (host * 255 + 0.5).astype(np.uint8)
+    file, host_file = file_pixels(snap, formats.FILE_SCALE), file_pixels(host8, formats.FILE_SCALE)
     base = {"scene": sname, "host": hname, "host_psnr": psnr(snap / 255, host8 / 255),
             "host_ssim": ssim(snap / 255, host8 / 255)}
     rows = []
     for name, (copy, seeds) in SHARING.items():
         for seed in range(seeds):
-            shared = copy(snap, np.random.default_rng(seed))
+            shared = copy(file, np.random.default_rng(seed))
             t = time.perf_counter()
             got = snapshot_in_image("copy", shared, None)
             ms = (time.perf_counter() - t) * 1000
             row = dict(base, distortion=name, seed=seed, meta_read=int(got is not None),
                        meta_wrong=int(got is not None and got[1] != want), meta_ms=ms,
-                       false_read=int(pixelmeta.find_meta(copy(host8, np.random.default_rng(seed))) is not None))
+                       false_read=int(pixelmeta.find_meta(copy(host_file, np.random.default_rng(seed))) is not None))
             if got is not None:
                 row["restore_psnr"] = judge.planes_psnr(restore_planes(got[0], got[1])[0])
             rows.append(row)
@@ -123,15 +128,15 @@ def bench_sharing(scenes: list[str], hosts: dict, refine: int, size: int, out: P
 
 def side_by_side(scene, host: np.ndarray, refine: int, size: int, path: Path) -> None:
     """Rows: the snapshot (or its copy) and 4 orbit views: original planes, then restored from a PNG, a
-    JPEG-75 copy and a 1080-px JPEG-90 copy, each read with no text (metadata from the pixels)."""
+    JPEG-75 copy and a 256-px JPEG-90 copy of the file, each read with no text (metadata from the pixels)."""
     from snapshot3d.images import write_png
     from snapshot3d.train.codec.commands import snapshot_for
 
     judge, pick = ViewJudge(scene, size), [0, 5, 10, 15]
     snap = snapshot_for("file", host, scene, 1.0, refine)
     rows = [(snap, judge.ref[pick])]
-    for name in ("png", "jpeg75", "1080 px (2.8x)"):
-        copy = SHARING[name][0](snap, np.random.default_rng(0))
+    for name in ("png", "jpeg75", "256 px"):
+        copy = SHARING[name][0](file_pixels(snap, formats.FILE_SCALE), np.random.default_rng(0))
         rgb, meta, _ = snapshot_in_image("copy", copy, None)
         rows.append((copy, judge.views(restore_planes(rgb, meta)[0])[pick]))
     fig = np.concatenate([np.concatenate([cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA) / 255.0, *views],

@@ -17,8 +17,11 @@ soft decisions over the repetitions, decodes them with the Viterbi algorithm and
 when its CRC holds, so a damaged mark is refused, never misread. The writer marks the host before the
 codec embeds the planes (the codec's residual is noise to the mark, not the other way round).
 
-Reading a copy: a square of another size is resized to the snapshot's; an image within `MAX_SHIFT` pixels
-of it (cropped or padded) is searched over offsets, nearest first. `find_meta` returns the metadata and
+Reading a copy: an image within k * `MAX_SHIFT` pixels of k times the snapshot's size (k from 2 to
+`formats.FILE_SCALE`: a file-medium file or a copy halved, perhaps cropped or padded) is first shrunk k times
+along its own squares (`shrink_squares`); a square of another size is
+resized to the snapshot's; an image within `MAX_SHIFT` pixels of it (cropped or padded) is searched over
+offsets, nearest first. `find_meta` returns the metadata and
 the snapshot realigned to the grid the codec needs.
 
 Images: (380, 380, 3) uint8 RGB in, (H, W, 3) uint8 RGB read back."""
@@ -257,11 +260,41 @@ def read_at(luma: np.ndarray) -> SheetMeta | None:
     return None
 
 
+def shrink_squares(rgb: np.ndarray, k: int) -> np.ndarray:
+    """An image (H, W, 3) uint8 written with each pixel a k x k square, perhaps cropped or padded by a few
+    pixels -> (about H/k, W/k, 3): the means of its own squares. Their phase is found where neighbouring
+    columns (rows) differ most, at the squares' edges, over a band of 256 rows (columns) through the middle;
+    the partial squares at the borders are dropped."""
+    h, w = rgb.shape[:2]
+    rows, cols = rgb[:, w // 2 - 128: w // 2 + 128].astype(np.float32), rgb[h // 2 - 128: h // 2 + 128].astype(np.float32)
+    start = []
+    for d in (np.abs(np.diff(rows, axis=0)).mean((1, 2)), np.abs(np.diff(cols, axis=1)).mean((0, 2))):
+        edge = int(np.argmax([d[p::k].mean() for p in range(k)]))     # an edge after index p (mod k)
+        start.append((edge + 1) % k)
+    y0, x0 = start
+    crop = rgb[y0: y0 + (h - y0) // k * k, x0: x0 + (w - x0) // k * k]
+    return cv2.resize(crop, (crop.shape[1] // k, crop.shape[0] // k), interpolation=cv2.INTER_AREA)
+
+
 def find_meta(rgb: np.ndarray, tries: int = 6) -> tuple[SheetMeta, np.ndarray] | None:
     """(metadata, (380, 380, 3) uint8 RGB realigned) from a snapshot copy (H, W, 3) uint8 RGB: the same size,
     a resized square, or cropped/padded by up to MAX_SHIFT pixels; None when no mark reads. Every offset is
     ranked by how well its repetitions agree (cheap: the block coefficients at all offsets are one filter
-    per frequency); the frame is decoded at the `tries` best."""
+    per frequency); the frame is decoded at the `tries` best. A copy near k times the snapshot's size (a
+    file-medium file, perhaps cropped or padded) is first read shrunk along its own squares, then, if no
+    mark reads there (a copy resized to near that size), as any other."""
+    n = formats.SNAPSHOT_SIZE
+    h, w = rgb.shape[:2]
+    k = round(max(h, w) / n)
+    if 2 <= k <= formats.FILE_SCALE and abs(h - k * n) <= k * MAX_SHIFT and abs(w - k * n) <= k * MAX_SHIFT:
+        found = _find_meta(shrink_squares(rgb, k), tries)
+        if found is not None:
+            return found
+    return _find_meta(rgb, tries)
+
+
+def _find_meta(rgb: np.ndarray, tries: int) -> tuple[SheetMeta, np.ndarray] | None:
+    """`find_meta` without the squares of a file written larger."""
     n = formats.SNAPSHOT_SIZE
     h, w = rgb.shape[:2]
     if abs(h - n) > MAX_SHIFT or abs(w - n) > MAX_SHIFT:

@@ -100,7 +100,9 @@ def sheet_command(args) -> int:
     out = Path(args.output)
     if out.suffix.lower() not in (".png", ".pdf"):
         raise UserError(f"cannot write {out.name}: the sheet is written as .png or .pdf")
-    snap = cv2.cvtColor(read_image_bgr(args.snapshot, "snapshot"), cv2.COLOR_BGR2RGB)
+    from .snapfile import snapshot_pixels
+
+    snap = snapshot_pixels(cv2.cvtColor(read_image_bgr(args.snapshot, "snapshot"), cv2.COLOR_BGR2RGB))
     n = formats.SNAPSHOT_SIZE
     if snap.shape[:2] != (n, n):
         raise UserError(f"{Path(args.snapshot).name} is {snap.shape[1]}x{snap.shape[0]}; a snapshot is {n}x{n}")

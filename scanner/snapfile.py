@@ -3,7 +3,9 @@ as text (a PNG text chunk or a JPEG comment, the fast path) and as a mark in the
 written by `embed`), so that a shared copy whose text was stripped, re-encoded or resized still restores.
 When both are there they must agree.
 
-Images: (380, 380, 3) uint8 RGB (a copy read back may be another size; `snapshot_in_image` realigns it)."""
+Images: (380, 380, 3) uint8 RGB. A file-medium snapshot is written at `formats.FILE_SCALE` times that size,
+each pixel a square (so a shared copy's JPEG blocks and chroma subsampling fall on several snapshot pixels);
+a file read back of another size is resized or realigned to 380x380 by `snapshot_in_image`."""
 from __future__ import annotations
 
 import io
@@ -20,19 +22,22 @@ from .imageio_safe import read_image_bgr, write_atomic
 from .pixelmeta import MAX_SHIFT, find_meta
 from .qr import SheetMeta, decode_payload, encode_payload
 
-__all__ = ["META_KEY", "encode_snapshot", "write_snapshot", "read_snapshot", "snapshot_in_image", "metas_agree",
+__all__ = ["META_KEY", "encode_snapshot", "write_snapshot", "file_pixels", "snapshot_pixels", "read_snapshot", "snapshot_in_image", "metas_agree",
            "metadata_text"]
 
 META_KEY = "snapshot3d"
 """name of the PNG text chunk holding the payload"""
 
 
-def encode_snapshot(rgb: np.ndarray, meta: SheetMeta, ext: str = ".png", jpeg_quality: int = 95) -> bytes:
-    """File bytes of a snapshot with its metadata; `ext` .png (lossless) or .jpg."""
+def encode_snapshot(rgb: np.ndarray, meta: SheetMeta, ext: str = ".png", jpeg_quality: int = 95,
+                    scale: int = 1) -> bytes:
+    """File bytes of a snapshot with its metadata; `ext` .png (lossless) or .jpg; the image written at `scale`
+    times its size (each pixel a `scale` x `scale` square)."""
     if rgb.dtype != np.uint8 or rgb.shape != (formats.SNAPSHOT_SIZE, formats.SNAPSHOT_SIZE, 3):
         raise ValueError(f"a snapshot is ({formats.SNAPSHOT_SIZE}, {formats.SNAPSHOT_SIZE}, 3) uint8 RGB, got "
                          f"{rgb.shape} {rgb.dtype}")
     text = encode_payload(meta)
+    rgb = file_pixels(rgb, scale)
     buf = io.BytesIO()
     if ext.lower() == ".png":
         info = PngImagePlugin.PngInfo()
@@ -45,8 +50,23 @@ def encode_snapshot(rgb: np.ndarray, meta: SheetMeta, ext: str = ".png", jpeg_qu
     return buf.getvalue()
 
 
-def write_snapshot(path, rgb: np.ndarray, meta: SheetMeta, jpeg_quality: int = 95) -> None:
-    write_atomic(path, encode_snapshot(rgb, meta, Path(path).suffix, jpeg_quality))
+def write_snapshot(path, rgb: np.ndarray, meta: SheetMeta, jpeg_quality: int = 95, scale: int = 1) -> None:
+    write_atomic(path, encode_snapshot(rgb, meta, Path(path).suffix, jpeg_quality, scale))
+
+
+def file_pixels(rgb: np.ndarray, scale: int) -> np.ndarray:
+    """A snapshot (380, 380, 3) uint8 as a file holds it at `scale` times its size: (380 s, 380 s, 3), each
+    pixel a `scale` x `scale` square."""
+    return np.repeat(np.repeat(rgb, scale, 0), scale, 1) if scale > 1 else rgb
+
+
+def snapshot_pixels(rgb: np.ndarray) -> np.ndarray:
+    """An image (H, W, 3) uint8 that is a snapshot written at an integer multiple of its size (the file
+    medium's) -> (380, 380, 3) by block means; any other image unchanged."""
+    n, (h, w) = formats.SNAPSHOT_SIZE, rgb.shape[:2]
+    if h == w and h > n and h % n == 0:
+        return cv2.resize(rgb, (n, n), interpolation=cv2.INTER_AREA)
+    return rgb
 
 
 def metadata_text(path) -> str | None:
@@ -96,6 +116,7 @@ def snapshot_in_image(name: str, rgb: np.ndarray, text: str | None, trust_text: 
                         f"mislabelled file); pass the sheet's QR text with --meta to choose")
     if found is not None:
         return found[1], meta, "text"
+    rgb = snapshot_pixels(rgb)
     if rgb.shape[:2] != (n, n):
         raise UserError(f"{name} is {rgb.shape[1]}x{rgb.shape[0]} and no snapshot mark reads in its pixels; a "
                         f"snapshot is {n}x{n} (for a photo of a printed sheet use 'snapshot3d decode')")

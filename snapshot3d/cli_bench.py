@@ -167,7 +167,7 @@ def add_bench_commands(bsub, add) -> None:
                              "copy (read with no text) against refinement time, per schedule and step count",
              _run("snapshot3d.bench.refine", "bench_refine_command"))
     _out(br)
-    br.add_argument("--steps", default="0,20,40,70,100,140", help="step counts of the shipped schedule (turns)")
+    br.add_argument("--steps", default="0,20,40,50,70,100,140", help="step counts of the shipped schedule (turns)")
     br.add_argument("--former", type=int, default=100, help="steps of the former schedule (both copies every step, "
                                                             "host weighted) measured beside it (0: not)")
     br.add_argument("--scenes", default="snapshot3d/assets/spot.s3d,bench/models/lego-print.s3d",

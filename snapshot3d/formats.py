@@ -10,7 +10,7 @@ __all__ = [
     "DENSITY_CLAMP", "RENDER_STEPS_PER_BOX", "OCC_RES", "OCC_ALPHA_THRESHOLD", "KB",
     # sheet and scan (issue 3)
     "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "FILE_CODEC", "FILE_CODECS", "PRINT_CODEC", "MEDIA", "MEDIUM_CODEC", "CODEC_MEDIUM",
-    "MARK_CODECS", "DEFAULT_MEDIUM", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
+    "MARK_CODECS", "DEFAULT_MEDIUM", "FILE_REFINE_STEPS", "FILE_SCALE", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
     "MARKER_GAP", "MARGIN_X", "MARGIN_Y", "COLUMN_LEFT", "COLUMN_RIGHT", "SHEET_BOX", "MARKER_ORIGINS",
     "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "QR_MAGIC", "QR_SEP", "QR_FIELDS",
 ]
@@ -102,7 +102,9 @@ DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is as
 # (CODEC_GRID x CODEC_GRID: SNAPSHOT_SIZE after CODEC_LEVELS Haar splits) by separable linear
 # interpolation, so that restoring a texel averages over about (CODEC_GRID / R)^2 grid cells. A codec carries planes up to
 # CODEC_MAX_RES x CODEC_MAX_RES with at most CODEC_CHANNELS channels; fewer channels are zero-padded.
-FILE_REFINE_STEPS = 70        # embed-time refinement steps of a file snapshot (`embed --refine`'s default)
+FILE_REFINE_STEPS = 50        # embed-time refinement steps of a file snapshot (`embed --refine`'s default)
+FILE_SCALE = 4                # a file snapshot is written at FILE_SCALE x SNAPSHOT_SIZE, each pixel a square of
+                              # FILE_SCALE^2 (a shared copy's JPEG then quantises 2x2 snapshot pixels per 8x8 block)
 CODEC_CHANNELS = 8            # plane channels the secret has room for (3 planes -> 24 secret channels)
 CODEC_MAX_RES = 64            # largest plane resolution the codec carries
 CODEC_LEVELS = 2              # Haar splits of the shipped codec (its weights file stores its own config)

@@ -40,3 +40,20 @@ def test_jpeg_pads_like_libjpeg_and_passes_gradients():
     assert y.shape == x.shape
     y.square().mean().backward()
     assert x.grad is not None and x.grad.abs().sum() > 0
+
+
+@pytest.mark.parametrize("scale", [2, 4])
+def test_jpeg_of_a_file_at_scale_is_the_upsampled_jpeg(scale):
+    """`scale`: the JPEG of the image upsampled (nearest) that many times, read back by block means, computed at
+    the image's own size; equal to doing it the long way (up to a rounding that float order may tip)."""
+    torch.manual_seed(0)
+    x = torch.rand(2, 3, 40, 56)
+    q = torch.tensor([75.0, 90.0])
+    up = x.repeat_interleave(scale, 2).repeat_interleave(scale, 3)
+    want = torch.nn.functional.avg_pool2d(jpeg_420(up, q), scale)
+    got = jpeg_420(x, q, scale)
+    assert got.shape == x.shape
+    assert (got - want).abs().mean() < 1e-5 and (got - want).abs().max() < 2e-3
+    assert (got - jpeg_420(x, q)).abs().mean() > 1e-3          # not the snapshot-size JPEG
+    with pytest.raises(ValueError, match="scale"):
+        jpeg_420(x, q, 3)

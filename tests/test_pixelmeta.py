@@ -16,7 +16,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.scanner import pixelmeta as pm
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import SheetMeta
-from snapshot3d.scanner.snapfile import encode_snapshot, metas_agree, read_snapshot
+from snapshot3d.scanner.snapfile import encode_snapshot, file_pixels, metas_agree, read_snapshot
 
 ASSETS = Path(str(resources.files("snapshot3d") / "assets"))
 META = SheetMeta(codec=formats.FILE_CODEC, box=(-0.55, -0.5, -0.45, 0.5, 0.6, 0.5), orbit=(2.7, 20.0, 40.0),
@@ -108,6 +108,12 @@ def test_mark_is_faint(marked):
     ("1080 px jpeg75", lambda x: _jpeg(_resize(x, 1080), 75)),
     ("crop 4 px", lambda x: _jpeg(np.ascontiguousarray(x[4:, :-3]), 90)),
     ("pad 4 px", lambda x: cv2.copyMakeBorder(x, 4, 0, 0, 4, cv2.BORDER_CONSTANT, value=(255, 255, 255))),
+    # the file as `embed --medium file` writes it (4x), and copies of it
+    ("4x file jpeg75", lambda x: _jpeg(file_pixels(x, 4), 75)),
+    ("crop 4x file 3 and 6 px", lambda x: _jpeg(np.ascontiguousarray(file_pixels(x, 4)[3:, 1:-5]), 90)),
+    ("pad 4x file 5 px", lambda x: cv2.copyMakeBorder(file_pixels(x, 4), 2, 3, 5, 0, cv2.BORDER_CONSTANT,
+                                                      value=(255, 255, 255))),
+    ("4x file resized to 1500 px", lambda x: _jpeg(_resize(file_pixels(x, 4), 1500), 90)),   # near 4x: not squares
 ])
 def test_mark_survives_sharing(marked, name, copy):
     for img in marked.values():
@@ -173,3 +179,10 @@ def test_shared_file_snapshot_restores_and_decodes_with_no_metadata(tmp_path):
     assert_one_line_error(run_cli("restore", str(tmp_path / "plain.png"), "-o", str(tmp_path / "x.s3d")),
                           "carries no snapshot3d metadata")
     assert not (tmp_path / "x.s3d").exists()
+
+
+def test_a_file_written_at_4x_shrinks_back_exactly(marked):
+    img = marked["coffee"]
+    assert np.array_equal(pm.shrink_squares(file_pixels(img, 4), 4), img)
+    cropped = file_pixels(img, 4)[3:, 2:]                     # squares cut at the top and left: found by their edges
+    assert np.array_equal(pm.shrink_squares(cropped, 4), img[1:, 1:])

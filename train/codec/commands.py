@@ -138,7 +138,8 @@ def embed_command(args) -> int:
     snap = snapshot_for(args.medium, host, scene, strength, args.refine, show_progress=True)
     secs = time.perf_counter() - t0
     codec = formats.MEDIUM_CODEC[args.medium]
-    write_snapshot(args.output, snap, scene_meta(scene, codec, strength), jpeg_quality=args.jpeg_quality)
+    write_snapshot(args.output, snap, scene_meta(scene, codec, strength), jpeg_quality=args.jpeg_quality,
+                   scale=formats.FILE_SCALE if args.medium == "file" else 1)
     host8 = (host * 255 + 0.5).astype(np.uint8)
     report = {"host_psnr": psnr(snap / 255.0, host8 / 255.0), "host_ssim": ssim(snap / 255.0, host8 / 255.0),
               "scene_kb": scene.scene_kb, "strength": strength, "medium": args.medium, "codec": codec,

@@ -4,7 +4,8 @@ snapshot itself and from JPEG copies of it, without moving further from the host
 
 Each step restores one copy of the current snapshot, in turn the 8-bit file itself and a JPEG copy
 at a quality drawn in [65, 95] (expectation over the draws, as for robust adversarial examples; the
-copy is `train.codec.jpeg`'s differentiable JPEG as OpenCV writes one), and takes an Adam step on the
+copy is `train.codec.jpeg`'s differentiable JPEG as OpenCV writes one, of the file as `embed` writes it:
+`formats.FILE_SCALE` times the snapshot's size, read back by block means), and takes an Adam step on the
 plane error. The host fidelity is a hard constraint: after every step the snapshot's difference from the host
 is scaled back onto the unrefined snapshot's mean square, so the host PSNR never falls below the
 unrefined snapshot's (projected gradient). The former schedule (`both-weighted`: both copies every step,
@@ -27,7 +28,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from snapshot3d import codec_layout
+from snapshot3d import codec_layout, formats
 from snapshot3d.errors import UserError
 
 from .channel import round_8bit
@@ -73,12 +74,13 @@ class Adam:
         self.param.addcdiv_(self.m, denom, value=-self.lr / (1 - b1 ** self.t))
 
 
-def copies(x: Tensor, jpeg: tuple[bool, ...], gen: torch.Generator) -> Tensor:
+def copies(x: Tensor, jpeg: tuple[bool, ...], gen: torch.Generator, scale: int = 1) -> Tensor:
     """What the restore network reads of snapshot x (1, 3, H, W) in [0, 1]: per entry of `jpeg`, the 8-bit
-    file (False) or a JPEG copy of it at a quality drawn in JPEG_QUALITY (True) -> (len(jpeg), 3, H, W)."""
+    file (False) or a JPEG copy of it at a quality drawn in JPEG_QUALITY (True), the file written at `scale`
+    times the snapshot's size and read back by `scale` x `scale` means -> (len(jpeg), 3, H, W)."""
     file, (lo, hi) = round_8bit(x), JPEG_QUALITY
-    return torch.cat([jpeg_420(file, lo + (hi - lo) * torch.rand(1, generator=gen)).clamp(0, 1) if j else file
-                      for j in jpeg])
+    return torch.cat([jpeg_420(file, lo + (hi - lo) * torch.rand(1, generator=gen), scale).clamp(0, 1) if j
+                      else file for j in jpeg])
 
 
 def _psnr(mse: float) -> float:
@@ -95,11 +97,11 @@ def _project(x0: torch.Tensor, delta: torch.Tensor, host: torch.Tensor, budget: 
 
 
 def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: int, strength: float = 1.0,
-                    lr: float | None = None, seed: int = 0, on_step=None, schedule: str = "turns"
-                    ) -> tuple[np.ndarray, dict]:
+                    lr: float | None = None, seed: int = 0, on_step=None, schedule: str = "turns",
+                    scale: int = formats.FILE_SCALE) -> tuple[np.ndarray, dict]:
     """-> (snapshot (380, 380, 3) uint8 RGB, {"host_psnr_unrefined", "plane_mse_first", "plane_mse_last"}).
     `schedule` one of SCHEDULES (lr None: its own, times `strength` for `turns`); `on_step(i)` is called after
-    each step (progress)."""
+    each step (progress); `scale`: the JPEG copies are of the file written at that many times the size."""
     if schedule not in SCHEDULES:
         raise ValueError(f"unknown refinement schedule {schedule!r}; choose from {', '.join(SCHEDULES)}")
     _, c, r, _ = planes.shape
@@ -116,7 +118,7 @@ def refine_snapshot(net: CodecNet, host: np.ndarray, planes: np.ndarray, steps: 
     weighted, log_w, losses = schedule == "both-weighted", math.log(10.0), []
     for i in range(steps):
         x = (x0 + delta).clamp(0, 1)
-        rest = net.reverse_secret(copies(x, (False, True) if weighted else (bool(i % 2),), gen)) / strength
+        rest = net.reverse_secret(copies(x, (False, True) if weighted else (bool(i % 2),), gen, scale)) / strength
         loss = sum(F.mse_loss(secret_to_planes_t(s, r, c), target_planes) for s in rest) / len(rest)
         opt.zero_grad(set_to_none=True)
         if weighted:
