@@ -94,6 +94,12 @@ def test_sheet_cli_png_pdf(tmp_path):
     beside = cv2.cvtColor(cv2.imread(str(tmp_path / "p.png")), cv2.COLOR_BGR2RGB)
     assert np.array_equal(pdf_image(pdf), beside)
     assert beside.shape[1] == layout.sheet_size()[0] * round(150 / 25.4 * 300 / layout.sheet_size()[0])
+    big = tmp_path / "snap4x.png"                        # a file-medium snapshot is written at 4x: the same sheet
+    cv2.imwrite(str(big), np.repeat(np.repeat(_snapshot(), 4, 0), 4, 1))
+    proc = subprocess.run([sys.executable, "-m", "snapshot3d", "sheet", str(big), "-o", str(tmp_path / "s4.png"),
+                           "--width-mm", "100", "--dpi", "300"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert np.array_equal(cv2.imread(str(tmp_path / "s4.png")), png)
     bad = tmp_path / "small.png"
     cv2.imwrite(str(bad), np.zeros((100, 120, 3), np.uint8))
     proc = subprocess.run([sys.executable, "-m", "snapshot3d", "sheet", str(bad), "-o", str(tmp_path / "x.png")],

@@ -6,7 +6,7 @@ resizing; libjpeg averages each 2x2 block, and its decoder upsamples with a tria
 half-pixel centres). Here: JFIF colour (full range), 2x2 block means, the IJG quality scaling of the
 Annex K tables at integer quality, an orthonormal 8x8 DCT as two small matrix products, kornia's
 polynomial rounding (round(x) + (x - round(x))^3, so gradients pass), the triangle upsampling. The image
-is padded to a multiple of 16 by repeating its last row and column, as libjpeg does. It is about 5x
+is padded to a multiple of 16 by repeating its last row and column, as libjpeg does. It is about 6x
 faster than kornia's and closer to OpenCV's files (README "Embed-time refinement").
 
 A file written at 2 or 4 times the image's size (each pixel a square, as `embed` writes a file snapshot)
@@ -112,23 +112,24 @@ def jpeg_420(x: Tensor, quality: Tensor, scale: int = 1) -> Tensor:
     """x (B, 3, H, W) RGB in [0, 1], quality (B,) -> the decoded JPEG (B, 3, H, W) RGB (see the module doc).
     `scale` 2 or 4: the JPEG of x upsampled that many times (nearest, each pixel an s x s square, as a
     file written at `scale` times the snapshot's size), read back as s x s means; computed at x's size."""
-    if scale == 1:
-        return _jpeg_420(x, quality)
-    if scale not in (2, 4):
+    if scale not in (1, 2, 4):
         raise ValueError(f"scale must be 1, 2 or 4, not {scale}")
     b, _, h, w = x.shape
-    unit = 16 // scale
+    unit = 16 // scale                                        # libjpeg pads the (upsampled) image to 16
     ph, pw = -h % unit, -w % unit
     x = F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
     ycc = _to_ycc(x)
     steps, dct = quant_tables(quality).to(x.dtype), _dct_matrix().to(x.dtype)
-    luma = _code_up(ycc[:, 0], steps[:, 0], dct, scale)
-    chroma = ycc[:, 1:]                                       # the 2x2 means of the upsampled chroma: itself, s/2 times
+    luma = _code(ycc[:, 0], steps[:, 0], dct) if scale == 1 else _code_up(ycc[:, 0], steps[:, 0], dct, scale)
+    # the chroma libjpeg codes, the 2x2 means of the (upsampled) chroma: at scale s >= 2 itself, s/2 times
+    chroma = F.avg_pool2d(ycc[:, 1:], 2) if scale == 1 else ycc[:, 1:]
     if scale == 4:
         chroma = chroma.repeat_interleave(2, 2).repeat_interleave(2, 3)
     hc, wc = chroma.shape[2:]
     chroma = _code(chroma.reshape(2 * b, hc, wc), steps[:, 1].repeat_interleave(2, 0), dct).reshape(b, 2, hc, wc)
-    return _to_rgb(torch.cat([luma[:, None], _up2_means(chroma, scale)], 1))[..., :h, :w]
+    chroma = (F.interpolate(chroma, scale_factor=2, mode="bilinear", align_corners=False) if scale == 1
+              else _up2_means(chroma, scale))
+    return _to_rgb(torch.cat([luma[:, None], chroma], 1))[..., :h, :w]
 
 
 def _to_ycc(x: Tensor) -> Tensor:
@@ -141,18 +142,3 @@ def _to_rgb(ycc: Tensor) -> Tensor:
     """`_to_ycc`'s inverse."""
     ycc = ycc + torch.tensor([128.0, 0.0, 0.0], dtype=ycc.dtype).view(1, 3, 1, 1)
     return torch.einsum("kc,bchw->bkhw", torch.tensor(_TO_RGB, dtype=ycc.dtype) / 255.0, ycc)
-
-
-def _jpeg_420(x: Tensor, quality: Tensor) -> Tensor:
-    """`jpeg_420` at scale 1."""
-    b, _, h, w = x.shape
-    ph, pw = -h % 16, -w % 16
-    x = F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
-    ycc = _to_ycc(x)
-    chroma = F.avg_pool2d(ycc[:, 1:], 2)
-    steps, dct = quant_tables(quality).to(x.dtype), _dct_matrix().to(x.dtype)
-    luma = _code(ycc[:, 0], steps[:, 0], dct)
-    chroma = _code(chroma.reshape(2 * b, *chroma.shape[2:]), steps[:, 1].repeat_interleave(2, 0), dct)
-    chroma = F.interpolate(chroma.reshape(b, 2, *chroma.shape[1:]), scale_factor=2, mode="bilinear",
-                           align_corners=False)
-    return _to_rgb(torch.cat([luma[:, None], chroma], 1))[..., :h, :w]
