@@ -90,11 +90,11 @@ QR_FIELDS = ("version", "codec", "box", "orbit")
 # the sheet's QR code name the codec, and decoding picks it from there (an unknown one is refused).
 PRINT_CODEC = "print-1"       # id of the print medium's codec (`snapshot3d.print_layout` + its restore network)
 MEDIA = ("print", "file")
-FILE_CODEC = "hinet-2"        # id of the file medium's codec that `embed` writes (weights, ONNX and QR name it)
-FILE_CODECS = (FILE_CODEC, "hinet-1")  # the file codecs this build reads (snapshots made before hinet-2 name hinet-1)
+FILE_CODEC = "hinet-3"        # id of the file medium's codec that `embed` writes (weights, ONNX and QR name it)
+FILE_CODECS = (FILE_CODEC, "hinet-2", "hinet-1")  # the file codecs this build reads (older snapshots name older ones)
 MEDIUM_CODEC = {"print": PRINT_CODEC, "file": FILE_CODEC}
 CODEC_MEDIUM = {PRINT_CODEC: "print", **{codec: "file" for codec in FILE_CODECS}}
-MARK_CODECS = ("hinet-1", "hinet-2", "print-1")   # a pixel mark's codec byte indexes this (append only, never reorder)
+MARK_CODECS = ("hinet-1", "hinet-2", "print-1", "hinet-3")   # a pixel mark's codec byte indexes this (append only, never reorder)
 DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is asked for as a file
 
 # --- the file medium's codec (issue 4) ---

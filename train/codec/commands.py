@@ -171,6 +171,7 @@ def train_codec_command(args) -> int:
                                set(cfg.holdout_hosts.split(",")))
     except ValueError as e:
         raise UserError(f"{e}; fit training scenes there first (see the README's codec section)") from None
+    out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     summary = train_codec(cfg, data, out, checkpoint=out.with_name(out.name + ".ckpt"),
                           log=lambda m: print(m, flush=True), device=resolve_device(args.device))
@@ -187,6 +188,7 @@ def train_print_codec_command(args) -> int:
     if cfg.captures < 40 or cfg.steps < 1 or cfg.batch < 1:
         raise UserError("--captures must be >= 40, --steps and --batch >= 1")
     out = Path(args.output) if args.output else front_end_path()
+    out.parent.mkdir(parents=True, exist_ok=True)
     log = lambda m: print(m, flush=True)  # noqa: E731
     t0 = time.time()
     files = make_captures(Path(args.data), CaptureConfig(count=cfg.captures, seed=cfg.seed), args.workers, log)

@@ -33,6 +33,12 @@ class CodecConfig:
     channel: bool = _f(True, "train through the print-and-capture channel (off: the paper's digital setting, 8-bit only)")
     sharing: bool = _f(False, "train through what sharing a file does (JPEG 60-95 with 4:2:0, once or twice, resizing "
                               "0.6x-2.8x and back; `channel.SharingRanges`) instead of the print-and-capture channel")
+    file_copies: bool = _f(False, "train through copies of the file as `embed` writes it (4x): the PNG, JPEG 60-95 of the "
+                                   "4x file, or the 4x file resized to 0.6x-3x of 380 px (mostly smaller) and JPEG "
+                                   "there, read back as `restore` does (`file_copies.FileCopyRanges`), in place of --sharing's channel")
+    copy_resize_prob: float = _f(0.55, "--file-copies: probability that a copy is resized (else the PNG or a JPEG of "
+                                       "the 4x file)")
+    copy_shrink_share: float = _f(0.75, "--file-copies: share of the resized copies that are smaller than 380 px")
     ramp: float = _f(0.5, "fraction of the run over which the channel level rises from 0 to its maximum")
     jpeg_prob: float = _f(0.6, "probability that a training image goes through JPEG (after the other distortions)")
     init: str = _f("", "codec weights to start from (a fine-tune with the same architecture); empty: random")

@@ -40,7 +40,7 @@ def quant_tables(quality: Tensor) -> Tensor:
     `jpeg_set_quality` (quality rounded to an integer in [1, 100])."""
     q = quality.detach().round().clamp(1, 100)
     scale = torch.where(q < 50, 5000.0 / q, 200.0 - 2.0 * q)
-    base = torch.tensor([_LUMA, _CHROMA], dtype=torch.float32).view(1, 2, 8, 8)
+    base = torch.tensor([_LUMA, _CHROMA], dtype=torch.float32, device=quality.device).view(1, 2, 8, 8)
     return torch.floor((base * scale.view(-1, 1, 1, 1) + 50.0) / 100.0).clamp(1, 255)
 
 
@@ -75,7 +75,7 @@ def _indicator_dct(dct: Tensor, s: int) -> tuple[Tensor, Tensor]:
     that is 1 on the s x s square of the p-th pixel (row-major) of an (8/s) x (8/s) source block and 0
     elsewhere, without the coefficients that no such block holds."""
     b = 8 // s
-    eye = torch.eye(b * b, dtype=dct.dtype).view(b * b, b, b)
+    eye = torch.eye(b * b, dtype=dct.dtype, device=dct.device).view(b * b, b, b)
     up = eye.repeat_interleave(s, 1).repeat_interleave(s, 2)                   # (b*b, 8, 8)
     m = (dct @ up @ dct.T).reshape(b * b, 64).T
     keep = torch.nonzero(m.abs().amax(1) > 1e-6)[:, 0]       # 25 of 64 at s = 4 (odd frequencies and 0)
@@ -99,7 +99,7 @@ def _code_up(plane: Tensor, steps: Tensor, dct: Tensor, s: int) -> Tensor:
 def _up2_means(c: Tensor, s: int) -> Tensor:
     """Chroma (B, 2, h, w) through the decoder's triangle upsampling by 2, then s x s means (s = 2 or 4):
     the separable filter [1, 6, 1] / 8 (s = 2) or [1, 7, 7, 1] / 16 at stride 2 (s = 4), edges replicated."""
-    k = torch.tensor([1.0, 6.0, 1.0], dtype=c.dtype) / 8 if s == 2 else torch.tensor([1.0, 7.0, 7.0, 1.0], dtype=c.dtype) / 16
+    k = torch.tensor([1.0, 6.0, 1.0] if s == 2 else [0.5, 3.5, 3.5, 0.5], dtype=c.dtype, device=c.device) / 8
     n, stride = k.numel(), s // 2
     b, ch, h, w = c.shape
     x = F.pad(c.reshape(b * ch, 1, h, w), (1, n - 2, 1, n - 2), mode="replicate")
@@ -119,7 +119,7 @@ def jpeg_420(x: Tensor, quality: Tensor, scale: int = 1) -> Tensor:
     ph, pw = -h % unit, -w % unit
     x = F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
     ycc = _to_ycc(x)
-    steps, dct = quant_tables(quality).to(x.dtype), _dct_matrix().to(x.dtype)
+    steps, dct = quant_tables(quality).to(x.device, x.dtype), _dct_matrix().to(x.device, x.dtype)
     luma = _code(ycc[:, 0], steps[:, 0], dct) if scale == 1 else _code_up(ycc[:, 0], steps[:, 0], dct, scale)
     # the chroma libjpeg codes, the 2x2 means of the (upsampled) chroma: at scale s >= 2 itself, s/2 times
     chroma = F.avg_pool2d(ycc[:, 1:], 2) if scale == 1 else ycc[:, 1:]
@@ -134,11 +134,11 @@ def jpeg_420(x: Tensor, quality: Tensor, scale: int = 1) -> Tensor:
 
 def _to_ycc(x: Tensor) -> Tensor:
     """RGB (B, 3, H, W) in [0, 1] -> JFIF Y, Cb, Cr in 8-bit units, level-shifted (Y - 128; Cb, Cr centred)."""
-    ycc = torch.einsum("kc,bchw->bkhw", torch.tensor(_TO_YCC, dtype=x.dtype) * 255.0, x)
-    return ycc - torch.tensor([128.0, 0.0, 0.0], dtype=x.dtype).view(1, 3, 1, 1)
+    ycc = torch.einsum("kc,bchw->bkhw", torch.tensor(_TO_YCC, dtype=x.dtype, device=x.device) * 255.0, x)
+    return ycc - torch.tensor([128.0, 0.0, 0.0], dtype=x.dtype, device=x.device).view(1, 3, 1, 1)
 
 
 def _to_rgb(ycc: Tensor) -> Tensor:
     """`_to_ycc`'s inverse."""
-    ycc = ycc + torch.tensor([128.0, 0.0, 0.0], dtype=ycc.dtype).view(1, 3, 1, 1)
-    return torch.einsum("kc,bchw->bkhw", torch.tensor(_TO_RGB, dtype=ycc.dtype) / 255.0, ycc)
+    ycc = ycc + torch.tensor([128.0, 0.0, 0.0], dtype=ycc.dtype, device=ycc.device).view(1, 3, 1, 1)
+    return torch.einsum("kc,bchw->bkhw", torch.tensor(_TO_RGB, dtype=ycc.dtype, device=ycc.device) / 255.0, ycc)

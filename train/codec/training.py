@@ -27,6 +27,7 @@ from snapshot3d.train.field.sampler import BoxFrame
 from .channel import ChannelRanges, SharingRanges, apply_channel, apply_sharing, curriculum_level, round_8bit
 from .config import CodecConfig
 from .data import CodecData, crop_batch, full_sample
+from .file_copies import FileCopyRanges, apply_file_copies
 from .hinet import build_codec, load_codec, save_codec
 from .net import haar
 
@@ -78,6 +79,8 @@ def _psnr(mse: float, peak: float = 1.0) -> float:
 def _channel(snap, level, cfg: CodecConfig, ranges, gen):
     if not cfg.channel:
         return round_8bit(snap)
+    if cfg.file_copies:
+        return apply_file_copies(snap, level, ranges, gen)
     return (apply_sharing if cfg.sharing else apply_channel)(snap, level, ranges, gen)
 
 
@@ -106,14 +109,15 @@ def initial_host_logw(init: str) -> float:
 def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path | None = None,
                 ranges: ChannelRanges = ChannelRanges(), log=print, device=None) -> dict:
     """Train (or resume) on `device` (None: the CPU) and write the weights to `out`; returns the run's summary.
-    The channel is `ranges` (print and capture), or `SharingRanges()` with `cfg.sharing`; `cfg.jpeg_prob`
-    replaces either's JPEG probability."""
+    The channel is `ranges` (print and capture), `SharingRanges()` with `cfg.sharing`, or `FileCopyRanges()`
+    with `cfg.file_copies`; `cfg.jpeg_prob` replaces its JPEG probability."""
     torch.manual_seed(cfg.seed)
     dev = torch.device(device or "cpu")
     net = build_codec(cfg)
     if not 0.0 <= cfg.jpeg_prob <= 1.0:
         raise UserError(f"--jpeg-prob must be in [0, 1], got {cfg.jpeg_prob}")
-    ranges = replace(SharingRanges() if cfg.sharing else ranges, jpeg_prob=cfg.jpeg_prob)
+    ranges = replace(FileCopyRanges(resize_prob=cfg.copy_resize_prob, shrink_share=cfg.copy_shrink_share)
+                     if cfg.file_copies else SharingRanges() if cfg.sharing else ranges, jpeg_prob=cfg.jpeg_prob)
     if cfg.init:
         start, start_cfg = load_codec(Path(cfg.init))
         arch = ("levels", "blocks", "width", "layers", "clamp")

@@ -9,7 +9,7 @@
 const S3DLocal = (() => {
   const SIZE = 380, GRID = 95, SECRET_CHANNELS = 8, C_MAX = 12, BAKE = 96, COARSE = 4;
   const OCC_ALPHA = 0.01, DENSE_ALPHA = 0.5, STEPS_PER_BOX = 192, DENSITY_CLAMP = 15, LOGIT_FLOOR = -10;
-  const ORBIT_ELEVATION = 20, ORBIT_FOV = 40, FILE_CODEC = "hinet-2";
+  const ORBIT_ELEVATION = 20, ORBIT_FOV = 40, FILE_CODEC = "hinet-3";
 
   // ArrayBuffer of a PNG -> the text of its tEXt chunk `keyword`, or null
   function pngText(buffer, keyword) {
