@@ -59,3 +59,15 @@ def test_channel_rounds_at_level_zero_and_passes_gradients(snap):
     assert y.shape == x.shape and not torch.equal(y, x.detach())
     y.square().sum().backward()
     assert torch.isfinite(x.grad).all() and float(x.grad.abs().mean()) > 0
+
+
+def test_copy_options_out_of_range_are_refused_in_one_line(tmp_path):
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.codec.config import CodecConfig
+    from snapshot3d.train.codec.training import train_codec
+
+    for field, value in (("copy_resize_prob", 1.5), ("copy_shrink_share", -0.1)):
+        cfg = CodecConfig(file_copies=True, **{field: value})
+        with pytest.raises(UserError, match=f"--{field.replace('_', '-')} must be in"):
+            train_codec(cfg, None, tmp_path / "c.npz")
+    assert not any(tmp_path.iterdir())

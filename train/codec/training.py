@@ -116,6 +116,9 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
     net = build_codec(cfg)
     if not 0.0 <= cfg.jpeg_prob <= 1.0:
         raise UserError(f"--jpeg-prob must be in [0, 1], got {cfg.jpeg_prob}")
+    for name in ("copy_resize_prob", "copy_shrink_share"):
+        if not 0.0 <= getattr(cfg, name) <= 1.0:
+            raise UserError(f"--{name.replace('_', '-')} must be in [0, 1], got {getattr(cfg, name)}")
     ranges = replace(FileCopyRanges(resize_prob=cfg.copy_resize_prob, shrink_share=cfg.copy_shrink_share)
                      if cfg.file_copies else SharingRanges() if cfg.sharing else ranges, jpeg_prob=cfg.jpeg_prob)
     if cfg.init:
