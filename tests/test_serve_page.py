@@ -149,12 +149,45 @@ def test_without_webgl2_the_server_renders_frames(browser, base_url):
     assert errors == [], errors
 
 
-def test_snapshot_png_decodes_in_the_browser_like_python(browser, base_url):
+@pytest.fixture(scope="module")
+def file_4x(tmp_path_factory) -> Path:
+    """The example snapshot as `embed` writes a file today: 4x its size, each pixel a 4 x 4 square."""
+    from snapshot3d import formats
+    from snapshot3d.scanner.snapfile import read_snapshot, write_snapshot
+
+    rgb, meta = read_snapshot(Path(__file__).parent / "data" / "spot-snapshot.png")
+    path = tmp_path_factory.mktemp("page") / "spot-snapshot-4x.png"
+    write_snapshot(path, rgb, meta, scale=formats.FILE_SCALE)
+    return path
+
+
+def test_square_means_round_as_opencv(browser, base_url):
+    """The page shrinks a file written k times larger by the means of its squares exactly as the Python
+    decode does (OpenCV's INTER_AREA, whose ties round half up at k = 2 and half to even otherwise)."""
+    page, errors = _page(browser, base_url)
+    rng = np.random.default_rng(0)
+    for k in (1, 2, 3, 4):
+        rgb = rng.integers(0, 256, (380 * k, 380 * k, 3), dtype=np.uint8)
+        rgba = np.dstack([rgb, np.full(rgb.shape[:2], 255, np.uint8)])
+        got = page.evaluate("([b64, k]) => Array.from(S3DLocal.squareMeans("
+                            "Uint8Array.from(atob(b64), (c) => c.charCodeAt(0)), k), (v) => Math.round(v * 255))",
+                            [base64.b64encode(rgba.tobytes()).decode(), k])
+        mine = np.asarray(got, np.uint8).reshape(3, 380, 380).transpose(1, 2, 0)
+        want = cv2.resize(rgb, (380, 380), interpolation=cv2.INTER_AREA) if k > 1 else rgb
+        assert np.array_equal(mine, want), f"k={k}: {int((mine != want).sum())} values differ from OpenCV's"
+    assert page.evaluate("[S3DLocal.pngSize(new Uint8Array(8).buffer), "
+                         "S3DLocal.pngSize(new Uint8Array(24).buffer)]") == [None, None]
+    assert errors == [], errors
+
+
+@pytest.mark.parametrize("which", ["380 px", "4x"])
+def test_snapshot_png_decodes_in_the_browser_like_python(browser, base_url, file_4x, which):
     """A dropped snapshot PNG is restored, unspread and baked in the page (onnxruntime-web): nothing is
-    uploaded, and the grid it bakes is the one the Python decode bakes for the same file."""
+    uploaded, and the grid it bakes is the one the Python decode bakes for the same file. The file as
+    `embed` writes it (4x, each pixel a square) decodes in the page too."""
     import httpx
 
-    snapshot = Path(__file__).parent / "data" / "spot-snapshot.png"
+    snapshot = Path(__file__).parent / "data" / "spot-snapshot.png" if which == "380 px" else file_4x
     page, errors = _page(browser, base_url)
     posts = []
     page.on("request", lambda r: posts.append(r.url) if r.method == "POST" else None)

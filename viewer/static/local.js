@@ -1,5 +1,7 @@
 // A snapshot PNG decoded in the browser, with no server work (docs/onnx-contract.md; the same steps as
-// viewer/decode.py for a snapshot file): its metadata line from the PNG tEXt chunk "snapshot3d", the
+// viewer/decode.py for a snapshot file): its metadata line from the PNG tEXt chunk "snapshot3d", a file
+// written at k times the snapshot's size (`embed` writes 4x) shrunk to 380x380 by the means of its k x k
+// squares, rounded as OpenCV's INTER_AREA rounds them (scanner/snapfile.py `snapshot_pixels`), the
 // restore graph in onnxruntime-web (vendored, WebAssembly), the least-squares unspread and 8-bit
 // rounding, then the field baked into a grid with the project and field graphs exactly as viewer/bake.py
 // does (a coarse pass at B/4, then the cells of the surface's shell at B), and the grid packed as the
@@ -9,7 +11,7 @@
 const S3DLocal = (() => {
   const SIZE = 380, GRID = 95, SECRET_CHANNELS = 8, C_MAX = 12, BAKE = 96, COARSE = 4;
   const OCC_ALPHA = 0.01, DENSE_ALPHA = 0.5, STEPS_PER_BOX = 192, DENSITY_CLAMP = 15, LOGIT_FLOOR = -10;
-  const ORBIT_ELEVATION = 20, ORBIT_FOV = 40, FILE_CODEC = "hinet-3";
+  const ORBIT_ELEVATION = 20, ORBIT_FOV = 40, FILE_CODEC = "hinet-3", MAX_SCALE = 8;
 
   // ArrayBuffer of a PNG -> the text of its tEXt chunk `keyword`, or null
   function pngText(buffer, keyword) {
@@ -27,6 +29,37 @@ const S3DLocal = (() => {
       p += 12 + n;
     }
     return null;
+  }
+
+  // ArrayBuffer of a PNG -> [width, height] from its IHDR chunk (which a PNG starts with), or null
+  function pngSize(buffer) {
+    const b = new Uint8Array(buffer), v = new DataView(buffer);
+    if (b.length < 24 || String.fromCharCode(...b.subarray(12, 16)) !== "IHDR") return null;
+    return [v.getUint32(16), v.getUint32(20)];
+  }
+
+  // k times the snapshot's size, square, k in 1..MAX_SCALE: the file medium's own files; else 0
+  function fileScale(width, height) {
+    const k = width / SIZE;
+    return width === height && Number.isInteger(k) && k >= 1 && k <= MAX_SCALE ? k : 0;
+  }
+
+  // RGBA bytes of a (k SIZE)^2 image -> planar RGB float32 (3, SIZE, SIZE) in [0, 1]: the 8-bit means of
+  // its k x k squares, ties rounded as OpenCV's INTER_AREA does (half up for k = 2, else half to even)
+  function squareMeans(px, k) {
+    const x = new Float32Array(3 * SIZE * SIZE), area = k * k, w = k * SIZE;
+    for (let y = 0; y < SIZE; y++)
+      for (let xx = 0; xx < SIZE; xx++)
+        for (let c = 0; c < 3; c++) {
+          let sum = 0;
+          for (let dy = 0; dy < k; dy++)
+            for (let dx = 0; dx < k; dx++) sum += px[4 * ((y * k + dy) * w + xx * k + dx) + c];
+          let q = Math.floor(sum / area);
+          const twice = 2 * (sum - q * area);
+          if (twice > area || (twice === area && (k === 2 || q % 2 === 1))) q += 1;
+          x[c * SIZE * SIZE + y * SIZE + xx] = q / 255;
+        }
+    return x;
   }
 
   // the metadata line (contract section 1) -> {version, codec, box, orbit, target, planes, strength}
@@ -197,12 +230,14 @@ const S3DLocal = (() => {
     return sessions;
   }
 
-  // a snapshot file this page can decode by itself: a PNG with its metadata line, file medium
+  // a snapshot file this page can decode by itself: a PNG with its metadata line, file medium, at 1 to
+  // MAX_SCALE times the snapshot's size (any other size, e.g. a resized copy, goes to the server, which
+  // finds the snapshot's grid in it)
   async function readable(file) {
     if (!window.ort || !/\.png$/i.test(file.name || "") && file.type !== "image/png") return null;
     const buffer = await file.arrayBuffer();
-    const text = pngText(buffer, "snapshot3d");
-    if (!text) return null;
+    const text = pngText(buffer, "snapshot3d"), size = pngSize(buffer);
+    if (!text || !size || !fileScale(...size)) return null;
     const meta = parseMeta(text);
     return meta.codec === FILE_CODEC && meta.version === 1 && meta.planes && meta.box ? { meta, text } : null;
   }
@@ -210,14 +245,13 @@ const S3DLocal = (() => {
   async function decode(file, meta, progress = () => {}) {
     const t0 = performance.now();
     const bitmap = await createImageBitmap(file, { colorSpaceConversion: "none", premultiplyAlpha: "none" });
-    if (bitmap.width !== SIZE || bitmap.height !== SIZE) throw new Error(`not a ${SIZE}x${SIZE} snapshot`);
+    const k = fileScale(bitmap.width, bitmap.height);
+    if (!k) throw new Error(`${bitmap.width}x${bitmap.height} is not a snapshot file's size (${SIZE}x${SIZE} times 1 to ${MAX_SCALE})`);
     const canvas = document.createElement("canvas");
-    canvas.width = canvas.height = SIZE;
+    canvas.width = canvas.height = k * SIZE;
     const ctx = canvas.getContext("2d", { willReadFrequently: true });
     ctx.drawImage(bitmap, 0, 0);
-    const px = ctx.getImageData(0, 0, SIZE, SIZE, { colorSpace: "srgb" }).data;
-    const x = new Float32Array(3 * SIZE * SIZE);
-    for (let i = 0; i < SIZE * SIZE; i++) for (let c = 0; c < 3; c++) x[c * SIZE * SIZE + i] = px[4 * i + c] / 255;
+    const x = squareMeans(ctx.getImageData(0, 0, k * SIZE, k * SIZE, { colorSpace: "srgb" }).data, k);
     progress("Loading the models…");
     const s = await models();
     const t1 = performance.now();
@@ -242,5 +276,5 @@ const S3DLocal = (() => {
              timings_ms: { load: Math.round(t1 - t0), restore: Math.round(t2 - t1), bake: Math.round(t3 - t2) } };
   }
 
-  return { readable, decode, pngText, parseMeta };
+  return { readable, decode, pngText, pngSize, parseMeta, squareMeans };
 })();
