@@ -169,10 +169,15 @@ def test_square_means_round_as_opencv(browser, base_url):
     for k in (1, 2, 3, 4):
         rgb = rng.integers(0, 256, (380 * k, 380 * k, 3), dtype=np.uint8)
         rgba = np.dstack([rgb, np.full(rgb.shape[:2], 255, np.uint8)])
-        got = page.evaluate("([b64, k]) => Array.from(S3DLocal.squareMeans("
-                            "Uint8Array.from(atob(b64), (c) => c.charCodeAt(0)), k), (v) => Math.round(v * 255))",
-                            [base64.b64encode(rgba.tobytes()).decode(), k])
-        mine = np.asarray(got, np.uint8).reshape(3, 380, 380).transpose(1, 2, 0)
+        got = page.evaluate("""([b64, k]) => {
+            const x = S3DLocal.squareMeans(Uint8Array.from(atob(b64), (c) => c.charCodeAt(0)), k);
+            const out = new Uint8Array(x.length);
+            for (let i = 0; i < x.length; i++) out[i] = Math.round(x[i] * 255);
+            let bin = "";
+            for (let i = 0; i < out.length; i += 8192) bin += String.fromCharCode(...out.subarray(i, i + 8192));
+            return btoa(bin);
+        }""", [base64.b64encode(rgba.tobytes()).decode(), k])
+        mine = np.frombuffer(base64.b64decode(got), np.uint8).reshape(3, 380, 380).transpose(1, 2, 0)
         want = cv2.resize(rgb, (380, 380), interpolation=cv2.INTER_AREA) if k > 1 else rgb
         assert np.array_equal(mine, want), f"k={k}: {int((mine != want).sum())} values differ from OpenCV's"
     assert page.evaluate("[S3DLocal.pngSize(new Uint8Array(8).buffer), "
