@@ -32,6 +32,8 @@ def image_size(path, what: str = "photo") -> tuple[int, int, str]:
     from PIL import Image
 
     path = Path(path)
+    if path.is_dir():
+        raise UserError(f"{path} is a folder; give the {what} file itself")
     if not path.is_file():
         raise UserError(f"{what} not found: {path}")
     if path.stat().st_size > MAX_BYTES:

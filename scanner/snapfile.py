@@ -62,7 +62,9 @@ def file_pixels(rgb: np.ndarray, scale: int) -> np.ndarray:
 
 def snapshot_pixels(rgb: np.ndarray) -> np.ndarray:
     """An image (H, W, 3) uint8 that is a snapshot written at an integer multiple of its size (the file
-    medium's) -> (380, 380, 3) by block means; any other image unchanged."""
+    medium's) -> (380, 380, 3) by block means; any other image unchanged. Only exact multiples, whose squares
+    start at (0, 0): a copy cropped or padded by a few pixels is shrunk by `pixelmeta.shrink_squares`, which
+    first finds the squares' phase from their edges (a flat image has none, and that search would guess)."""
     n, (h, w) = formats.SNAPSHOT_SIZE, rgb.shape[:2]
     if h == w and h > n and h % n == 0:
         return cv2.resize(rgb, (n, n), interpolation=cv2.INTER_AREA)

@@ -92,3 +92,17 @@ def test_refinement_adam_steps_as_torch_adam():
             opt.step()
     assert float((a.detach() - start).abs().max()) > 0.01  # it moved
     assert float((a - b).abs().max()) <= 1e-6
+
+
+def test_refinement_copies_are_read_as_8bit_files():
+    """The refinement's JPEG copies come back in 8-bit steps, as a reader gets them (the same path as the
+    training's copies of the 4x file), and differ from the lossless file."""
+    import torch
+
+    from snapshot3d.train.codec.refine import copies
+    x = torch.rand(1, 3, 64, 64, generator=torch.Generator().manual_seed(1))
+    got = copies(x, (False, True), torch.Generator().manual_seed(0), formats.FILE_SCALE)
+    assert got.shape == (2, 3, 64, 64)
+    steps = got.detach() * 255
+    assert float((steps - steps.round()).abs().max()) < 1e-3
+    assert float((got[1] - got[0]).abs().mean()) > 1 / 255

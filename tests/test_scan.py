@@ -159,6 +159,7 @@ def test_cli_bad_files(tmp_path, sheet):
     bomb_png(tmp_path / "bomb.png")
     _assert_one_line_error(run("scan", str(tmp_path / "bomb.png"), "-o", str(out)), "decompression bomb", out)
     _assert_one_line_error(run("scan", str(tmp_path / "nope.jpg"), "-o", str(out)), "not found", out)
+    _assert_one_line_error(run("scan", str(tmp_path), "-o", str(out)), "is a folder; give the photo file itself", out)
 
 
 def test_cli_half_out_of_frame_and_no_sheet(tmp_path, sheet):

@@ -77,7 +77,7 @@ def decode_command(args) -> int:
     r = dec.report
     print(f"decoded {args.photo}: {len(dec.views)} views of {args.size}x{args.size} in {r['decode_ms']:.0f} ms "
           f"(scan {r['timings_ms']['scan']:.0f}, restore {r['timings_ms']['restore']:.0f}, render "
-          f"{r['timings_ms']['render']:.0f}); wrote {args.output}/")
+          f"{r['timings_ms']['render']:.0f}); wrote {Path(args.output)}/")
     for line in _quality_lines(r["quality_estimate"]):
         print(line)
     return 0

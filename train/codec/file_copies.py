@@ -78,17 +78,17 @@ def _resize(x: Tensor, op: Tensor) -> Tensor:
     return torch.einsum("ph,bchw,qw->bcpq", op, x, op)
 
 
-def copy_of(x: Tensor, size: int | None, qualities: tuple[float, ...]) -> Tensor:
-    """One copy of snapshots x (B, 3, n, n) in [0, 1] written as the 4x file: resized by `INTER_AREA` to
-    size x size (None: not resized; a size relative to n, as f x n) and JPEG-coded at each of `qualities` in
-    turn, then read back to n x n -> (B, 3, n, n), not clipped."""
+def copy_of(x: Tensor, size: int | None, qualities: tuple[float, ...], scale: int = formats.FILE_SCALE) -> Tensor:
+    """One copy of snapshots x (B, 3, n, n) in [0, 1] written as a file at `scale` times their size (the 4x
+    file): resized by `INTER_AREA` to size x size (None: not resized; a size relative to n, as f x n) and
+    JPEG-coded at each of `qualities` in turn, then read back to n x n -> (B, 3, n, n), 8-bit values."""
     n = x.shape[-1]
     y = round_8bit(x)
-    if size is not None:    # the app resizes the 4x file, then codes the copy at its own size
-        y = round_8bit(_resize(y, resize_operator(n, size, cv2.INTER_AREA, formats.FILE_SCALE)))
+    if size is not None:    # the app resizes the file, then codes the copy at its own size
+        y = round_8bit(_resize(y, resize_operator(n, size, cv2.INTER_AREA, scale)))
     for q in qualities:
         y = round_8bit(jpeg_420(y, torch.full((y.shape[0],), float(q), device=y.device),
-                                formats.FILE_SCALE if size is None else 1))
+                                scale if size is None else 1))
     if size is None:
         return y
     return round_8bit(_resize(y, resize_operator(size, n, cv2.INTER_CUBIC if size < n else cv2.INTER_AREA)))

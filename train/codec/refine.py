@@ -32,8 +32,8 @@ from snapshot3d import codec_layout, formats
 from snapshot3d.errors import UserError
 
 from .channel import round_8bit
+from .file_copies import copy_of
 from .hinet import embed_planes, secret_grid
-from .jpeg import jpeg_420
 from .net import CodecNet
 from .training import secret_to_planes_t
 
@@ -77,9 +77,10 @@ class Adam:
 def copies(x: Tensor, jpeg: tuple[bool, ...], gen: torch.Generator, scale: int = 1) -> Tensor:
     """What the restore network reads of snapshot x (1, 3, H, W) in [0, 1]: per entry of `jpeg`, the 8-bit
     file (False) or a JPEG copy of it at a quality drawn in JPEG_QUALITY (True), the file written at `scale`
-    times the snapshot's size and read back by `scale` x `scale` means -> (len(jpeg), 3, H, W)."""
+    times the snapshot's size and read back by `scale` x `scale` means, in 8-bit steps as a reader gets them
+    (`file_copies.copy_of`, the one path of the copies training and refinement make) -> (len(jpeg), 3, H, W)."""
     file, (lo, hi) = round_8bit(x), JPEG_QUALITY
-    return torch.cat([jpeg_420(file, lo + (hi - lo) * torch.rand(1, generator=gen), scale).clamp(0, 1) if j
+    return torch.cat([copy_of(file, None, (lo + (hi - lo) * float(torch.rand(1, generator=gen)),), scale) if j
                       else file for j in jpeg])
 
 
