@@ -129,7 +129,7 @@ def read_snapshot(path, meta_text: str | None = None) -> tuple[np.ndarray, Sheet
     """(380, 380, 3) uint8 RGB and its metadata, from the file's text or the mark in its pixels (a copy that
     was re-encoded, resized or cropped is realigned); `meta_text` (a QR payload) overrides both."""
     path = Path(path)
-    rgb = cv2.cvtColor(read_image_bgr(path), cv2.COLOR_BGR2RGB)
+    rgb = cv2.cvtColor(read_image_bgr(path, "snapshot"), cv2.COLOR_BGR2RGB)
     got = snapshot_in_image(path.name, rgb, meta_text or metadata_text(path), trust_text=meta_text is not None)
     if got is None:
         size = "" if rgb.shape[:2] == (formats.SNAPSHOT_SIZE,) * 2 else f" ({rgb.shape[1]}x{rgb.shape[0]})"

@@ -90,6 +90,10 @@ def test_restore_bad_inputs(tmp_path):
     corrupt = tmp_path / "corrupt.png"
     corrupt.write_bytes(bare.read_bytes()[:500])
     assert_one_line_error(run("restore", str(corrupt), "-o", str(tmp_path / "x.s3d")), "corrupt")
+    assert_one_line_error(run("restore", str(tmp_path / "gone.png"), "-o", str(tmp_path / "x.s3d")),
+                          "snapshot not found")
+    assert_one_line_error(run("restore", str(tmp_path), "-o", str(tmp_path / "x.s3d")),
+                          "is a folder; give the snapshot file itself")
     text = tmp_path / "notes.png"
     text.write_text("not an image at all")
     proc = run("restore", str(text), "-o", str(tmp_path / "x.s3d"))

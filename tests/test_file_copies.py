@@ -40,7 +40,7 @@ def test_resize_operator_is_opencvs(snap):
 
 @pytest.mark.parametrize("size,quality", [(None, 75), (256, 90), (512, 75)])
 def test_copies_match_opencvs_files(snap, size, quality):
-    got = (copy_of(_t(snap), size and size, (float(quality),))[0].permute(1, 2, 0).numpy().clip(0, 1) * 255)
+    got = (copy_of(_t(snap), size, (float(quality),))[0].permute(1, 2, 0).numpy().clip(0, 1) * 255)
     big = np.repeat(np.repeat(snap, 4, 0), 4, 1)
     if size is not None:
         big = cv2.resize(big, (size, size), interpolation=cv2.INTER_AREA)
