@@ -17,8 +17,13 @@ knows the host, so it cancels the host's own projection on each carrier (improve
 Malvar and Florencio 2003): the decoder sees the carrier's value plus channel noise, not the host.
 Clipping to [0, 1] and 8-bit rounding are corrected by a few projection rounds (`embed`).
 
+Codecs: `print-1` is that linear code; `print-2` (what `embed` writes) also winds the ~300 strongest
+coefficients onto folded carriers (`snapshot3d.print_fold`), a non-linear code that gains where the
+capture's noise is low. Both are read (the metadata names the codec).
+
 Layouts: planes (3, C, R, R) float in [-1, 1] (`formats.PLANE_NAMES` order); images (380, 380, 3) RGB,
-uint8 or float in [0, 1]; carrier values (N,) float, pilots first.
+uint8 or float in [0, 1]; carrier values (N,) float: pilots, one per coefficient (`coef` order), then
+the folded coefficients' cos carriers and their sin carriers.
 """
 from __future__ import annotations
 
@@ -28,7 +33,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from . import bands, formats
+from . import bands, formats, print_fold
 
 __all__ = ["PrintLayout", "print_layout", "make_layout", "restore_layout", "prior_spectrum", "allocate", "embed", "embed_values", "despread",
            "read_carriers", "band_weights", "band_response", "carrier_chips", "plane_dct", "plane_idct", "restore",
@@ -107,6 +112,11 @@ class PrintLayout:
     pilot_signs: np.ndarray
     bands: dict[str, float] = field(default_factory=lambda: dict(PRINT_BANDS))
     """its carrier bands and their relative energies per coefficient (the codec's: `PRINT_BANDS`)"""
+    folded: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    """(F,) int: indices into `coef` of the coefficients also carried on a helix (`print_fold`; none in
+    `print-1`); their `scale` is the linear carrier's share"""
+    fold_amp: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(F,): the helix carriers' amplitude of each folded coefficient at strength 1"""
 
     @property
     def carriers(self) -> int:
@@ -179,26 +189,35 @@ def carrier_chips(count: int, rng: np.random.Generator,
     return chips, rng.choice([-1.0, 1.0], size=chips.shape) * np.sqrt(pool_w[chips])
 
 
-@lru_cache(maxsize=8)
-def print_layout(res: int, channels: int) -> PrintLayout:
-    """The carriers of (3, channels, res, res) planes (deterministic: both sides build the same)."""
-    return make_layout(res, channels, PRINT_BANDS)
+@lru_cache(maxsize=16)
+def print_layout(res: int, channels: int, codec: str = formats.PRINT_CODEC) -> PrintLayout:
+    """The carriers of (3, channels, res, res) planes for a print codec id (deterministic: both sides
+    build the same)."""
+    if codec not in formats.PRINT_CODECS:
+        raise ValueError(f"unknown print codec {codec!r}: this build reads {', '.join(formats.PRINT_CODECS)}")
+    return make_layout(res, channels, PRINT_BANDS, fold=codec != "print-1")
 
 
-def make_layout(res: int, channels: int, pool: dict[str, float]) -> PrintLayout:
+def make_layout(res: int, channels: int, pool: dict[str, float], fold: bool = False) -> PrintLayout:
     """The carriers of (3, channels, res, res) planes over any bands `pool` (name -> relative energy per
-    coefficient; the codec's are `PRINT_BANDS`, others are bench candidates: `bench.print_bands`)."""
+    coefficient; the codec's are `PRINT_BANDS`, others are bench candidates: `bench.print_bands`);
+    `fold`: the strongest coefficients also get helix carriers (`print-2`)."""
     check_print_planes(channels, res)
     n = formats.SNAPSHOT_SIZE
     lam = np.tile(prior_spectrum(res).ravel(), 3 * channels)
     total = PAYLOAD_RMS ** 2 * n * n * 3
     power = allocate(lam, total * (1 - _PILOT_SHARE), DESIGN_NOISE)
     active = np.flatnonzero(power > 1e-9 * total)
+    folded = np.flatnonzero(power[active] >= DESIGN_NOISE * 10 ** (print_fold.FOLD_CSNR_DB / 10)) if fold \
+        else np.zeros(0, np.int64)
     rng = np.random.default_rng(_SEED + 1000 * res + channels)
-    chips, w = carrier_chips(PILOTS + len(active), rng, pool)
+    chips, w = carrier_chips(PILOTS + len(active) + 2 * len(folded), rng, pool)
     pilot_amp = float(np.sqrt(total * _PILOT_SHARE / PILOTS))
-    return PrintLayout(res, channels, chips, w, active, np.sqrt(power[active] / lam[active]), lam[active],
-                       pilot_amp, rng.choice([-1.0, 1.0], size=PILOTS), dict(pool))
+    scale = np.sqrt(power[active] / lam[active])
+    scale[folded] *= np.sqrt(print_fold.FOLD_LINEAR)
+    fold_amp = np.sqrt((1 - print_fold.FOLD_LINEAR) * power[active][folded])
+    return PrintLayout(res, channels, chips, w, active, scale, lam[active], pilot_amp,
+                       rng.choice([-1.0, 1.0], size=PILOTS), dict(pool), folded, fold_amp)
 
 
 def random_planes(res: int, channels: int, rng: np.random.Generator) -> np.ndarray:
@@ -221,9 +240,12 @@ def plane_idct(coef: np.ndarray, shape) -> np.ndarray:
 
 
 def carrier_values(lay: PrintLayout, planes: np.ndarray, strength: float = 1.0) -> np.ndarray:
-    """planes (3, C, R, R) -> what each carrier must read (N,): pilots, then scaled DCT coefficients."""
-    vals = plane_dct(planes)[lay.coef] * lay.scale
-    return strength * np.concatenate([lay.pilot_amp * lay.pilot_signs, vals])
+    """planes (3, C, R, R) -> what each carrier must read (N,): pilots, scaled DCT coefficients, then the
+    folded coefficients' helix carriers (cos, then sin)."""
+    coef = plane_dct(planes)[lay.coef]
+    cos, sin = print_fold.helix(coef[lay.folded] / np.sqrt(lay.prior[lay.folded]))
+    return strength * np.concatenate([lay.pilot_amp * lay.pilot_signs, coef * lay.scale,
+                                      lay.fold_amp * cos, lay.fold_amp * sin])
 
 
 def cancel_share(host: np.ndarray, lay: PrintLayout, host_psnr: float) -> float:
@@ -242,15 +264,16 @@ def cancel_share(host: np.ndarray, lay: PrintLayout, host_psnr: float) -> float:
 
 
 def embed(host: np.ndarray, planes: np.ndarray, host_psnr: float = HOST_PSNR, rounds: int = 4,
-          cancel: float | None = None, with_payload: bool = False):
+          cancel: float | None = None, with_payload: bool = False, codec: str = formats.PRINT_CODEC):
     """host (380, 380, 3) float RGB in [0, 1], planes (3, C, R, R) in [-1, 1] -> snapshot (380, 380, 3)
     uint8 RGB at `host_psnr` dB from the host (the payload's power is scaled to it; the pilots tell the
     decoder the scale) whose every carrier reads its value plus what is left of the host's own projection:
     `cancel` of it is cancelled (None: `cancel_share` decides for this host), and clipping and rounding
     are corrected by `rounds` projections. `with_payload`: also the payload pattern alone (380, 380, 3)
-    float32, the carriers times their values with no host (what the restore front-end learns to find)."""
+    float32, the carriers times their values with no host (what the restore front-end learns to find).
+    `codec`: the print codec id whose carriers to write."""
     _, c, r, _ = planes.shape
-    lay = print_layout(r, c)
+    lay = print_layout(r, c, codec)
     unit = carrier_values(lay, planes)
     snap, scaled = embed_values(host, lay, unit, host_psnr, rounds, cancel)
     if not with_payload:
@@ -311,10 +334,10 @@ def _filters(lay: PrintLayout, img: np.ndarray):
 
 
 def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | None = None,
-             weighted: bool = True, combine: bool = True) -> tuple[np.ndarray, np.ndarray]:
+             weighted: bool = True, combine: bool = True, codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, np.ndarray]:
     """What each carrier of (3, channels, res, res) planes reads in an image: `read_carriers` of their
-    layout."""
-    return read_carriers(image, print_layout(res, channels), capture, weighted, combine)
+    layout under `codec`."""
+    return read_carriers(image, print_layout(res, channels, codec), capture, weighted, combine)
 
 
 def read_carriers(image: np.ndarray, lay: PrintLayout, capture: np.ndarray | None = None,
@@ -423,11 +446,11 @@ class Reading:
 
 
 def restore(read: np.ndarray, factor: np.ndarray, res: int, channels: int,
-            strength: float = 1.0) -> tuple[np.ndarray, Reading]:
-    """Carrier readings (N,) and their relative noise powers (N,) (`despread`) -> planes (3, C, R, R)
-    float32 (the MMSE estimate, not clipped) and the pilots' `Reading` (gain; noise per carrier of average
-    noise factor)."""
-    return restore_layout(print_layout(res, channels), read, factor, strength)
+            strength: float = 1.0, codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, Reading]:
+    """Carrier readings (N,) and their relative noise powers (N,) (`despread` with the same `codec`) ->
+    planes (3, C, R, R) float32 (the MMSE estimate, not clipped; the posterior mean for folded
+    coefficients) and the pilots' `Reading` (gain; noise per carrier of average noise factor)."""
+    return restore_layout(print_layout(res, channels, codec), read, factor, strength)
 
 
 def restore_layout(lay: PrintLayout, read: np.ndarray, factor: np.ndarray,
@@ -438,10 +461,17 @@ def restore_layout(lay: PrintLayout, read: np.ndarray, factor: np.ndarray,
     gain = max(float(np.mean(pilots)) / lay.pilot_amp, 1e-3)
     unit = max(float(np.mean((pilots - gain * lay.pilot_amp) ** 2 / factor[:PILOTS])), 1e-14)
     noise = unit * factor[PILOTS:] / strength ** 2   # per carrier, in units of strength 1
-    a = lay.scale * gain
+    m, f = len(lay.coef), len(lay.folded)
+    a, y, n = lay.scale * gain, read[PILOTS:] / strength, noise[:m]
+    est = a * lay.prior / (a * a * lay.prior + n) * y[:m]
+    err = lay.prior * n / (a * a * lay.prior + n)
+    if f:   # the folded coefficients: the posterior mean from their linear and helix readings
+        k, sd = lay.folded, np.sqrt(lay.prior[lay.folded])
+        x, var = print_fold.unfold(y[k], a[k] * sd, n[k], y[m:m + f], y[m + f:], gain * lay.fold_amp,
+                                   noise[m:m + f], noise[m + f:])
+        est[k], err[k] = x * sd, var * lay.prior[k]
     coef = np.zeros(3 * channels * res * res)
-    coef[lay.coef] = a * lay.prior / (a * a * lay.prior + noise) * read[PILOTS:] / strength
-    err = lay.prior * noise / (a * a * lay.prior + noise)
+    coef[lay.coef] = est
     missing = np.ones(coef.size, bool)
     missing[lay.coef] = False
     total_err = err.sum() + np.tile(prior_spectrum(res).ravel(), 3 * channels)[missing].sum()

@@ -32,7 +32,7 @@ def test_allocation_spends_the_budget_where_it_pays():
 def test_carriers_are_disjoint(res, channels):
     lay = print_layout.print_layout(res, channels)
     assert len(np.unique(lay.chips)) == lay.chips.size            # no coefficient serves two carriers
-    assert lay.carriers == print_layout.PILOTS + len(lay.coef) and lay.chips.shape[1] >= 1
+    assert lay.carriers == print_layout.PILOTS + len(lay.coef) + 2 * len(lay.folded) and lay.chips.shape[1] >= 1
     assert len(lay.coef) <= 3 * channels * res * res
 
 

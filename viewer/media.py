@@ -1,6 +1,7 @@
 """Restoring planes from a (rectified) snapshot with the codec its metadata names, torch-free: the `file`
 medium's invertible network (one ONNX graph, then the least-squares unspread) or the `print` medium's
-designed carrier despreader (numpy, a linear receiver). An unknown codec id is refused in one line.
+designed carrier despreader (numpy: a linear receiver, and for `print-2` the posterior of its folded
+carriers). An unknown codec id is refused in one line.
 
 Layouts: snapshot (380, 380, 3) uint8 RGB; planes (3, C, R, R) float32 in [-1, 1], rounded to the 8-bit
 values a scene carries."""
@@ -34,17 +35,19 @@ def restore_file(snapshot: np.ndarray, res: int, channels: int, strength: float 
     return codec_layout.secret_to_planes(secret, res, channels)
 
 
-def restore_print(snapshot: np.ndarray, res: int, channels: int, run=None) -> tuple[np.ndarray, print_layout.Reading]:
+def restore_print(snapshot: np.ndarray, res: int, channels: int, run=None,
+                  codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, print_layout.Reading]:
     """The print medium: the capture read carrier by carrier (matched filters shaped and weighted by the
     capture's brightness), MMSE with the gain and noise the pilots measure. Returns planes and the pilots'
     `Reading` (an estimate of the planes' error, no ground truth needed). `run` (x (1, 3, 380, 380) ->
     payload estimate, same layout) puts a learned front-end before the filters: the bench's `print-front`
-    row; the product reads the capture itself, which measured better (README, "The print medium")."""
+    row; the product reads the capture itself, which measured better (README, "The print medium").
+    `codec`: the print codec id the snapshot names (its carriers)."""
     if run is None:
-        return print_layout.restore(*print_layout.despread(snapshot, res, channels), res, channels)
+        return print_layout.restore(*print_layout.despread(snapshot, res, channels, codec=codec), res, channels, codec=codec)
     restored = run(_nchw(snapshot))[0].transpose(1, 2, 0)
-    read, factor = print_layout.despread(restored, res, channels, capture=snapshot)
-    return print_layout.restore(read, factor, res, channels)
+    read, factor = print_layout.despread(restored, res, channels, capture=snapshot, codec=codec)
+    return print_layout.restore(read, factor, res, channels, codec=codec)
 
 
 def restore_planes(snapshot: np.ndarray, meta, runners: dict | None = None) -> tuple[np.ndarray, dict]:
@@ -58,7 +61,7 @@ def restore_planes(snapshot: np.ndarray, meta, runners: dict | None = None) -> t
     if medium == "file":
         planes, info = restore_file(snapshot, res, channels, meta.strength or 1.0, runners.get("restore"), meta.codec), {}
     elif medium == "print":
-        planes, reading = restore_print(snapshot, res, channels, runners.get("restore-print"))
+        planes, reading = restore_print(snapshot, res, channels, runners.get("restore-print"), meta.codec)
         info = {"plane_rmse_expected": round(reading.plane_rmse, 4), "pilot_gain": round(reading.gain, 4),
                 "pilot_noise": float(f"{reading.noise:.4g}")}
     else:

@@ -166,5 +166,5 @@ def train_print_codec(cfg: PrintCodecConfig, caps: np.ndarray, snaps: np.ndarray
     save_front_end(net, cfg, out)
     last = [h for h in history if "held_out_loss" in h]
     return {"config": asdict(cfg), "steps": step, "held_out_loss_of_capture": zero,
-            "held_out": last[-1] if last else None, "history": history[-6:], "codec": formats.PRINT_CODEC,
+            "held_out": last[-1] if last else None, "history": history[-6:], "codec": "print-1",
             "bands": print_layout.PRINT_BANDS, "params": int(sum(p.numel() for p in net.parameters()))}
