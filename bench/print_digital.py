@@ -1,6 +1,6 @@
 """`snapshot3d bench print-digital`: the digital payload (`bench.digital_payload`: quantised planes, CRC,
-convolutional code, nested layers) against the shipped analog carriers (`print_layout`'s codec; `print-1` when its results were written) on the same scenes,
-hosts, severities and seeds, each through the real channel (sheet -> `simulate` -> `scan`).
+convolutional code, nested layers) against the shipped analog carriers (`print_layout`'s codec; `print-1`
+when its results were written) on the same scenes, hosts, severities and seeds, each through the real channel (sheet -> `simulate` -> `scan`).
 
 Rows (print_digital.csv), per scene, host, severity and seed:
 - `print`: the shipped codec: `restore_psnr` (views at --size against the scene's own) and plane RMSE;

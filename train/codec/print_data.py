@@ -25,10 +25,11 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.errors import UserError
 
-__all__ = ["CaptureConfig", "host_sources", "host_name", "read_host", "make_capture", "make_captures", "load_captures", "HELD_OUT_HOSTS"]
+__all__ = ["CaptureConfig", "host_sources", "host_name", "read_host", "make_capture", "make_captures", "load_captures", "HELD_OUT_HOSTS", "FRONT_END_CODEC"]
 
 HELD_OUT_HOSTS = ("coffee", "chelsea")
-_CODEC = "print-1"   # the front-end (a bench row, not shipped) was trained on print-1 snapshots; kept so it reproduces
+FRONT_END_CODEC = "print-1"
+"""the print codec of the front-end's training snapshots (a bench row, not shipped; its weights were trained on it)"""
 _PLANES = ((32, 4), (24, 4), (48, 4), (64, 8), (16, 4))
 _SEVERITIES = ("mild", "moderate", "severe", "jpeg75")
 _SEVERITY_P = (0.3, 0.35, 0.3, 0.05)
@@ -104,13 +105,13 @@ def make_capture(host_spec: str, seed: int, cfg: CaptureConfig = CaptureConfig()
     host = _host(host_spec, rng)
     planes = print_layout.random_planes(res, ch, rng)
     target_db = float(rng.uniform(cfg.host_psnr_min, cfg.host_psnr_max))
-    snap = print_layout.embed(host, planes, target_db, codec=_CODEC)
+    snap = print_layout.embed(host, planes, target_db, codec=FRONT_END_CODEC)
     severity = str(rng.choice(_SEVERITIES, p=_SEVERITY_P))
     dots = int(rng.choice(_DOTS))
     preset = PRESETS[severity]
     if preset.physical:
         preset = replace(preset, print_dots_per_px=dots)
-    meta = SheetMeta(codec=_CODEC, box=(-1, -1, -1, 1, 1, 1), orbit=(3.0, 20.0, 40.0), planes=(res, ch))
+    meta = SheetMeta(codec=FRONT_END_CODEC, box=(-1, -1, -1, 1, 1, 1), orbit=(3.0, 20.0, 40.0), planes=(res, ch))
     data, _, _ = simulate(render_sheet(snap, meta, 2), preset, int(rng.integers(2 ** 31)))
     try:
         capture = scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot

@@ -26,6 +26,7 @@ from snapshot3d.errors import UserError
 
 from ..weights import load_weights, save_weights
 from .print_config import PrintCodecConfig
+from .print_data import FRONT_END_CODEC
 from .print_net import FrontEnd, pool_loss
 
 __all__ = ["PrintCodecConfig", "train_print_codec", "save_front_end", "load_front_end", "front_end_path",
@@ -166,5 +167,5 @@ def train_print_codec(cfg: PrintCodecConfig, caps: np.ndarray, snaps: np.ndarray
     save_front_end(net, cfg, out)
     last = [h for h in history if "held_out_loss" in h]
     return {"config": asdict(cfg), "steps": step, "held_out_loss_of_capture": zero,
-            "held_out": last[-1] if last else None, "history": history[-6:], "codec": "print-1",
+            "held_out": last[-1] if last else None, "history": history[-6:], "codec": FRONT_END_CODEC,
             "bands": print_layout.PRINT_BANDS, "params": int(sum(p.numel() for p in net.parameters()))}
