@@ -109,7 +109,7 @@ def _decode(method: str, rect: np.ndarray, scene, meta):
     """planes (3, C, R, R) and the pilots' expected plane error (print) from a rectified capture."""
     from snapshot3d.viewer.media import restore_planes
 
-    planes, info = restore_planes(rect, meta, {"restore-print": _front_end()} if method == "print-front" else None)
+    planes, info = restore_planes(rect, meta, {"print-front": _front_end()} if method == "print-front" else None)
     return planes, info.get("plane_rmse_expected")
 
 

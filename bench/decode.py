@@ -3,7 +3,8 @@ the snapshots of the file codec and the reference views).
 
 - end to end: `--severity` photos (default `moderate`) of the demo's print scene hidden in a held-out host,
   N seeds: `decode_ms` per stage, `restore_psnr` (decoded views vs the reference renderer's views of the
-  original planes) and `e2e_psnr` (decoded views vs the mesh's ground-truth orbit views);
+  original planes) and `e2e_psnr` (decoded views vs the mesh's ground-truth orbit views), and the time the
+  numpy reference of the print restore graph takes on the same scan;
 - a sweep on one capture (`--sweep-severity`) of samples per pixel, bake resolution, probe size and render
   size: decode time against `restore_psnr`, with the Pareto front;
 - the quality estimate's calibration, one line per codec (`viewer.quality`): captures of every severity
@@ -11,6 +12,8 @@ the snapshots of the file codec and the reference views).
   predictor (print: log10 of the pilots' expected plane error; file: the markers' pilot_psnr); the line
   is then scored on captures in other hosts it never saw (its held-out error is what `decode` reports).
   The lines are written to `--calibration-dir` (default: the package's assets, which `decode` reads).
+  Every print capture's planes are also restored by the numpy receiver: how often the graph's 8-bit planes
+  differ from it (`print_graph_vs_numpy`).
 Writes decode.csv, decode.json and decode.png under --out."""
 from __future__ import annotations
 
@@ -33,7 +36,7 @@ from snapshot3d.scanner.imageio_safe import write_atomic
 from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
-from snapshot3d.scene import load_scene_file
+from snapshot3d.scene import load_scene_file, quantize_planes
 from snapshot3d.viewer.decode import decode_photo
 from snapshot3d.viewer.quality import calibration_file, predictor_value
 from snapshot3d.viewer.render import RenderConfig, render_views
@@ -104,6 +107,23 @@ def fit_calibration(fit_rows: list[dict], check_rows: list[dict], codec: str) ->
                       f"{list(FIT_HOSTS)}, scored on {list(CHECK_HOSTS)}, severities {','.join(CALIB_SEVERITIES)}"}
 
 
+def _against_numpy(photo: Path, codes: np.ndarray) -> tuple[dict, np.ndarray]:
+    """The print restore graph's 8-bit planes `codes` (as `decode` restored `photo`) against the numpy receiver
+    it was written from, on the same scan: the share of codes that differ, their largest difference, and the
+    numpy receiver's time (ms); and the scan."""
+    from snapshot3d import print_layout
+    from snapshot3d.viewer.decode import read_input
+
+    _, capture, meta, _ = read_input(photo)
+    t0 = time.perf_counter()
+    planes, _ = print_layout.restore(*print_layout.despread(capture, *meta.planes, codec=meta.codec), *meta.planes,
+                                     codec=meta.codec)
+    ms = (time.perf_counter() - t0) * 1e3
+    d = np.abs(quantize_planes(planes).astype(int) - codes.astype(int))
+    return {"graph_codes_differing": float(np.mean(d > 0)), "graph_codes_max_diff": int(d.max()),
+            "restore_numpy_ms": ms}, capture
+
+
 def _calibration_rows(scenes: dict, codec: str, seeds: int, out: Path) -> list[dict]:
     rows = []
     for sname, scene in scenes.items():
@@ -123,10 +143,18 @@ def _calibration_rows(scenes: dict, codec: str, seeds: int, out: Path) -> list[d
                     rows.append({"group": "calib", "codec": codec, "scene": sname, "host": host, "severity": sev,
                                  "seed": seed, "restore_psnr": psnr(dec.views, ref), "pilot_psnr": q["pilot_psnr_db"],
                                  "plane_rmse_expected": q["plane_rmse_expected"],
-                                 "predictor": predictor_value(codec, q["pilot_psnr_db"], q["plane_rmse_expected"])})
+                                 "predictor": predictor_value(codec, q["pilot_psnr_db"], q["plane_rmse_expected"]),
+                                 **(_against_numpy(photo, dec.scene.codes)[0] if codec == formats.PRINT_CODEC else {})})
                     photo.unlink(missing_ok=True)
             print(f"calibration {codec} {sname} {host}: {len(rows)} captures", flush=True)
     return rows
+
+
+def _graph_agreement(rows: list[dict]) -> dict:
+    """Over every print capture decoded: how often the restore graph's 8-bit planes differ from numpy's."""
+    return {"captures": len(rows), "captures_with_any_code_differing": sum(r["graph_codes_differing"] > 0 for r in rows),
+            "codes_differing_max_share": max((r["graph_codes_differing"] for r in rows), default=None),
+            "codes_max_diff": max((r["graph_codes_max_diff"] for r in rows), default=None)}
 
 
 def bench_decode_command(args) -> int:
@@ -143,7 +171,7 @@ def bench_decode_command(args) -> int:
         dec = decode_photo(photo)
         r = dec.report
         rows.append({"group": "e2e", "severity": args.severity, "seed": seed, "decode_ms": r["decode_ms"],
-                     **{f"{k}_ms": v for k, v in r["timings_ms"].items()},
+                     **{f"{k}_ms": v for k, v in r["timings_ms"].items()}, **_against_numpy(photo, dec.scene.codes)[0],
                      "restore_psnr": psnr(dec.views, ref[formats.ORBIT_SIZE]),
                      "e2e_psnr": psnr(dec.views, truth) if truth is not None else None,
                      "restore_psnr_expected": r["quality_estimate"]["restore_psnr_expected_db"]})
@@ -186,6 +214,8 @@ def bench_decode_command(args) -> int:
     med = lambda k: float(np.median([r[k] for r in e2e])) if e2e and e2e[0].get(k) is not None else None  # noqa: E731
     summary = {"decode_ms_median": med("decode_ms"), "first_view_ms_median": med("first_view_ms"),
                "stage_ms_median": {k: med(f"{k}_ms") for k in ("scan", "restore", "bake", "render")},
+               "restore_numpy_ms_median": med("restore_numpy_ms"),
+               "print_graph_vs_numpy": _graph_agreement([r for r in rows if "graph_codes_differing" in r]),
                "restore_psnr_median": med("restore_psnr"), "e2e_psnr_median": med("e2e_psnr"),
                "quality_estimate": calibrations,
                "pareto": [f"{sweep[i]['setting']}={sweep[i]['value']}" for i in front], "default_on_front": 0 in front}

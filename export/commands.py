@@ -1,4 +1,5 @@
-"""`snapshot3d export -o DIR` (or `--install`): the ONNX models, checked against torch on real inputs.
+"""`snapshot3d export -o DIR` (or `--install`): the ONNX models, checked against torch (the print receiver
+against its numpy reference) on real inputs.
 
 The models are written and checked in a hidden staging folder first; only models that pass the parity
 check replace what stands in the destination (the package's shipped models with `--install`)."""
@@ -18,7 +19,7 @@ __all__ = ["export_command"]
 
 def export_command(args) -> int:
     from .onnx_export import export_all, restore_keys
-    from .parity import field_parity, restore_parity
+    from .parity import field_parity, print_graph_agrees, print_parity, restore_parity
 
     out = asset() if args.install else Path(args.output)
     if out.exists() and not out.is_dir():
@@ -31,10 +32,13 @@ def export_command(args) -> int:
         parity = {"field": field_parity(paths["project"], paths["field"])}
         parity.update({k: restore_parity(paths[k], paths["project"], paths["field"], codec=c)
                        for k, c in restore_keys().items()})
+        parity["restore-print"] = print_parity(paths["restore-print"], paths["project"], paths["field"])
         print(json.dumps(parity))
         if parity["field"]["views_max_abs_diff"] > 1e-3 or \
-                any(parity[k]["restore_psnr_diff_db"] > 0.05 for k in restore_keys()):
-            raise UserError("ONNX parity check failed: the exported models do not match torch; nothing was written")
+                any(parity[k]["restore_psnr_diff_db"] > 0.05 for k in restore_keys()) or \
+                any(not print_graph_agrees(v) for v in parity["restore-print"].values()):
+            raise UserError("ONNX parity check failed: the exported models do not match torch (or the print receiver's "
+                            "numpy reference); nothing was written")
         for info in models.values():
             final = out / Path(info["path"]).name
             os.replace(info["path"], final)

@@ -10,7 +10,13 @@ FILE (.npz) holds, for the snapshot file `tests/data/spot-snapshot.png` (its RGB
   (with `planes` zero-padded to 12 channels) and output, B = 16;
 - `field_rows` int64 (M, 3), `field_density_logit` float32 (M,), `field_rgb` float32 (M, 3): the field
   graph's input (with `project_tables`) and outputs for M = 64 grid cells;
-- `meta` (text): the snapshot's metadata payload (the QR text)."""
+- `meta` (text): the snapshot's metadata payload (the QR text);
+- the print medium's restore graph, for the scan of the demo's example photo (`snapshot3d/assets/
+  example-photo.jpg`, a `moderate` photo of a `print-2` sheet): `print_capture` uint8 (380, 380, 3) RGB (the
+  rectified, colour-corrected capture; the graph's `snapshot` is it / 255, NCHW), `print_meta` (its QR text),
+  `print_<name>` for each layout input of `snapshot3d.print_feeds.LAYOUT_INPUTS` (index arrays stored as
+  int32: feed them as int64), and the outputs `print_planes` float32 (3, C, R, R) (compare with atol 1e-4)
+  and `print_reading` float32 (3,) (rtol 1e-4)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -48,7 +54,25 @@ def make_vectors(models: dict, snapshot_png: Path = VECTORS_INPUT) -> dict:
     logit, colour = session(str(models["field"])).run(None, {"tables": tables, "rows": rows})
     return {"restore_secret": secret.astype(np.float16), "planes": planes, "project_interp": interp,
             "project_tables": tables, "field_cells": cells.astype(np.int64), "field_rows": rows,
-            "field_density_logit": logit, "field_rgb": colour, "meta": np.array(encode_payload(meta))}
+            "field_density_logit": logit, "field_rgb": colour, "meta": np.array(encode_payload(meta)),
+            **print_vectors(models["restore-print"])}
+
+
+def print_vectors(graph_path, photo: Path | None = None) -> dict:
+    """The `print_*` arrays above, for the scan of `photo` (default the demo's example photo)."""
+    from snapshot3d import print_feeds
+    from snapshot3d.paths import asset
+    from snapshot3d.scanner.qr import encode_payload
+    from snapshot3d.viewer.decode import read_input
+    from snapshot3d.viewer.runtime import session
+
+    _, capture, meta, _ = read_input(photo or asset("example-photo.jpg"))
+    feeds = print_feeds.graph_feeds(capture, *meta.planes, meta.codec)
+    planes, reading = session(str(graph_path)).run(None, feeds)
+    layout = {f"print_{k}": (v.astype(np.int32) if v.dtype == np.int64 else v) for k, v in feeds.items()
+              if k != "snapshot"}
+    return {"print_capture": capture, "print_meta": np.array(encode_payload(meta)), **layout,
+            "print_planes": planes, "print_reading": reading}
 
 
 def write_vectors(path, models: dict) -> None:

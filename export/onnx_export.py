@@ -1,12 +1,14 @@
-"""torch -> ONNX for the restore network and the renderer's two field graphs: pinned opset, fixed input
-and output names, metadata (codec id, decoder version, orbit), `onnx.checker`, and a parity check
-against torch on the same inputs (an export that drifts fails; it is never skipped)."""
+"""torch -> ONNX for the restore graphs (each file codec's network, and the print medium's designed receiver)
+and the renderer's two field graphs: pinned opset, fixed input and output names, metadata (codec id, decoder
+version, orbit), `onnx.checker`, and a parity check against torch (the file codecs, the renderer) or the
+numpy reference (the print receiver) on the same inputs (an export that drifts fails; it is never skipped)."""
 from __future__ import annotations
 
 import io
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from snapshot3d import formats
@@ -24,17 +26,24 @@ from .models import (
     RestoreGraph,
 )
 
-__all__ = ["OPSET", "MODEL_KINDS", "DOCS", "export_restore", "export_project", "export_field",
+__all__ = ["OPSET", "MODEL_KINDS", "DOCS", "export_restore", "export_restore_print", "export_project", "export_field",
            "export_all", "restore_keys"]
 
 OPSET = 17
-MODEL_KINDS = ("restore", "project", "field")
+MODEL_KINDS = ("restore", "restore-print", "project", "field")
 # Each graph's contract, written into the model as its doc string (README "The ONNX models" says the same).
 DOCS = {
     "restore": "file medium (the codec named by the metadata's codec_id and the file name). Input snapshot: float32 (1, 3, 380, 380), RGB, NCHW, values in [0, 1] "
                "(uint8 / 255). Output secret: float32 (1, 24, 95, 95): plane k's channel c at index 8k + c (planes xy, "
                "xz, yz); divide by the strength in the metadata, then planes = P S P^T per channel with P = pinv(U), U "
                "(95, R) the linear interpolation of R texel centres onto 95 cell centres (snapshot3d/codec_layout.py).",
+    "restore-print": "print medium (every print codec, every plane size: the layout of the metadata's codec_id and "
+                     "plane size comes in as inputs, snapshot3d/print_feeds.py). Input snapshot: float32 (1, 3, 380, "
+                     "380), RGB, NCHW, in [0, 1] (the scanner's rectified capture, uint8 / 255); chips int64 (N, K), base "
+                     "float32 (N, K), place int64 (3*C*R*R,), scale and prior float32 (M,), pilots float32 (256,), folded "
+                     "int64 (F,), fold_amp float32 (F,), dct float32 (R, R), prior_rest float32 (). Outputs planes: float32 "
+                     "(3, C, R, R) (clip to [-1, 1], round to 8 bits); reading: float32 (3,): the pilots' gain, noise "
+                     "per carrier and the planes' expected RMS error.",
     "project": "renderer, part 1. Inputs planes: float32 (3, 12, R, R) in [-1, 1] (planes xy, xz, yz; channels beyond "
                "the scene's zero); interp: float32 (B, R), the bilinear weights of B grid coordinates over R texels. "
                "Output tables: float32 (3, B*B, 32), the decoder's first layer (without bias) at every grid node.",
@@ -45,6 +54,7 @@ DOCS = {
 
 
 def _metadata(codec: str) -> dict:
+    """The metadata of every graph; `codec`: the codec ids its restore graph reads (comma-separated)."""
     return {"codec_id": codec, "decoder_version": formats.DECODER_VERSION,
             "snapshot_size": str(formats.SNAPSHOT_SIZE), "orbit_views": str(formats.ORBIT_VIEWS),
             "orbit_size": str(formats.ORBIT_SIZE), "orbit_elevation_deg": str(formats.ORBIT_ELEVATION_DEG),
@@ -92,6 +102,24 @@ def export_restore(codec, path: Path, codec_id: str = formats.FILE_CODEC) -> int
                    codec=codec_id)
 
 
+def export_restore_print(path: Path) -> int:
+    """The print medium's restore graph (`export.print_graph`), traced on the current codec's 16x4 layout; every
+    layout dimension is dynamic, so it reads any plane size and both print codecs."""
+    from snapshot3d import print_feeds
+
+    from .print_graph import PrintRestoreGraph
+
+    s = formats.SNAPSHOT_SIZE
+    feeds = print_feeds.graph_feeds((torch.rand(s, s, 3) * 255).to(torch.uint8).numpy(), 16, 4)
+    args = tuple(torch.from_numpy(np.asarray(feeds[k])) for k in print_feeds.PRINT_GRAPH_INPUTS)
+    dynamic = {"chips": {0: "N", 1: "K"}, "base": {0: "N", 1: "K"}, "place": {0: "S"}, "scale": {0: "M"},
+               "prior": {0: "M"}, "folded": {0: "F"}, "fold_amp": {0: "F"}, "dct": {0: "R", 1: "R"},
+               "planes": {1: "C", 2: "R", 3: "R"}}
+    return _export(PrintRestoreGraph().eval(), args, print_feeds.PRINT_GRAPH_INPUTS, print_feeds.PRINT_GRAPH_OUTPUTS,
+                   dynamic, path, "restore-print", codec=",".join(formats.PRINT_CODECS),
+                   out_shapes={"planes": [3, "C", "R", "R"], "reading": [3]})
+
+
 def export_project(decoder, path: Path) -> int:
     planes = torch.rand(3, formats.C_MAX, 64, 64) * 2 - 1
     dynamic = {"planes": {2: "R", 3: "R"}, "interp": {0: "B", 1: "R"}, "tables": {1: "T"}}
@@ -113,8 +141,9 @@ def restore_keys() -> dict:
 
 
 def export_all(out: Path, log=print) -> dict:
-    """Write the models into `out` (the restore graph of every file codec this build reads, and the renderer's
-    two graphs); returns their paths and sizes, keyed as in `restore_keys` and 'project', 'field'."""
+    """Write the models into `out` (the restore graph of every file codec this build reads, the print medium's
+    restore graph, and the renderer's two graphs); returns their paths and sizes, keyed as in `restore_keys`
+    and 'restore-print', 'project', 'field'."""
     from snapshot3d.train.codec.hinet import codec_path, load_codec
     from snapshot3d.train.field.decoder import load_decoder
 
@@ -122,8 +151,10 @@ def export_all(out: Path, log=print) -> dict:
     t0 = time.time()
     decoder = load_decoder()
     names = {k: model_file("restore", c) for k, c in restore_keys().items()}
-    names.update(project=model_file("project"), field=model_file("field"))
+    names.update({"restore-print": model_file("restore-print"), "project": model_file("project"),
+                  "field": model_file("field")})
     sizes = {k: export_restore(load_codec(codec_path(c))[0], out / names[k], c) for k, c in restore_keys().items()}
+    sizes["restore-print"] = export_restore_print(out / names["restore-print"])
     sizes.update(project=export_project(decoder, out / names["project"]),
                  field=export_field(decoder, out / names["field"]))
     log(f"exported {', '.join(f'{names[k]} ({v / 1e6:.2f} MB)' for k, v in sizes.items())} in {time.time() - t0:.1f} s")

@@ -1,5 +1,5 @@
 """Where the package's shipped files live (torch-free): `snapshot3d/assets/` holds the decoder and
-codec weights, the three ONNX models, the default scene and the demo's example photo."""
+codec weights, the ONNX models, the default scene and the demo's example photo."""
 from __future__ import annotations
 
 from importlib import resources
@@ -18,6 +18,7 @@ def asset(name: str = "") -> Path:
 
 def model_file(kind: str, codec: str | None = None) -> str:
     """File name of an exported model: kind 'restore' (a file medium's restore network; names its codec,
-    default `formats.FILE_CODEC`), 'project' or 'field' (name the decoder)."""
-    return {"restore": f"restore-{codec or formats.FILE_CODEC}.onnx",
+    default `formats.FILE_CODEC`), 'restore-print' (the print medium's receiver, one graph for every print
+    codec), 'project' or 'field' (name the decoder)."""
+    return {"restore": f"restore-{codec or formats.FILE_CODEC}.onnx", "restore-print": "restore-print.onnx",
             "project": f"project-{formats.DECODER_VERSION}.onnx", "field": f"field-{formats.DECODER_VERSION}.onnx"}[kind]

@@ -422,14 +422,15 @@ def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarr
     beta = np.linalg.solve(cov, gain * np.abs(shape).mean(0))
     share = _per_band(band, q * w, nb)   # each carrier's designed response per band
     resp = share @ (beta * gain)
-    if np.median(resp) <= 0:
+    if 2 * np.count_nonzero(resp > 0) <= len(resp):   # most carriers would read with the wrong sign
         return q, noise
     keep = (share @ gain) / np.where(resp > 1e-30, resp, 1e-30)
     combined = q * beta[band] * keep[:, None]
     signs = lay.pilot_signs
 
-    def pilot_snr(f):   # the pilots' SNR through filters f
+    def pilot_snr(f):   # the pilots' SNR through filters f (scale-free: normalised first, as the float32 graph must)
         x = np.einsum("nk,nk->n", chips[p], f[p]) * signs
+        x = x / max(float(np.abs(x).max()), 1e-30)
         return float(np.mean(x)) ** 2 / max(float(np.var(x)), 1e-30)
 
     return (combined, noise) if pilot_snr(combined) > pilot_snr(q) else (q, noise)

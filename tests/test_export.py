@@ -1,6 +1,9 @@
 """ONNX export of the models: checker-clean, pinned names and metadata, and parity with torch on
 real inputs (an export failure fails here; it is never skipped); the grid graphs against the
-reference field maths."""
+reference field maths; the print receiver's graph against its numpy reference, at every plane size and
+for both print codecs."""
+from pathlib import Path
+
 import numpy as np
 import onnx
 import onnxruntime as ort
@@ -12,8 +15,15 @@ from snapshot3d.export.onnx_export import (
     export_field,
     export_project,
     export_restore,
+    export_restore_print,
 )
-from snapshot3d.export.parity import field_parity, restore_parity, torch_field_models
+from snapshot3d.export.parity import (
+    field_parity,
+    print_graph_agrees,
+    print_parity,
+    restore_parity,
+    torch_field_models,
+)
 from snapshot3d.train.codec.hinet import load_codec
 from snapshot3d.train.field.decoder import load_decoder
 from snapshot3d.train.field.field import decode, sample_planes
@@ -65,6 +75,66 @@ def test_exported_models_match_torch_on_real_inputs(tmp_path):
     assert r["restore_psnr_diff_db"] <= 0.05 and r["restore_psnr_onnx"] > 20, r
 
 
+def test_print_graph_matches_the_numpy_receiver_on_real_captures(tmp_path):
+    """restore-print.onnx reads a lossless print snapshot and the scan of a moderate photo of its sheet as the
+    numpy receiver does (the same 8-bit planes, the same views), for both print codecs."""
+    graph = tmp_path / "restore-print.onnx"
+    assert export_restore_print(graph) < 5e6
+    meta = {p.key: p.value for p in onnx.load(str(graph)).metadata_props}
+    assert meta["codec_id"].split(",") == list(formats.PRINT_CODECS)
+    project, field = _export_field_models(tmp_path)
+    rows = print_parity(graph, project, field)
+    assert sorted(rows) == sorted(f"{c} {k}" for c in formats.PRINT_CODECS for k in ("lossless", "moderate"))
+    for name, row in rows.items():
+        assert print_graph_agrees(row), (name, row)
+        assert row["restore_psnr_onnx"] > (40 if "lossless" in name else 18), (name, row)
+
+
+def test_print_graph_reads_every_plane_size_and_codec(tmp_path):
+    """One graph, any layout: planes of other sizes than it was traced with, and print-1's layout (no folded
+    carriers), read from a noisy snapshot as numpy reads them."""
+    from snapshot3d import print_feeds, print_layout
+    from snapshot3d.scanner.backgrounds import load_host
+    graph = tmp_path / "restore-print.onnx"
+    export_restore_print(graph)
+    sess = ort.InferenceSession(str(graph), providers=["CPUExecutionProvider"])
+    rng = np.random.default_rng(3)
+    host = load_host("builtin:chelsea")
+    for (r, c), codec in (((24, 4), "print-2"), ((48, 2), "print-2"), ((16, 4), "print-1")):
+        planes = print_layout.random_planes(r, c, rng)
+        snap = print_layout.embed(host, planes, codec=codec)
+        noisy = np.clip(snap + rng.normal(0, 4, snap.shape), 0, 255).astype(np.uint8)
+        want, reading = print_layout.restore(*print_layout.despread(noisy, r, c, codec=codec), r, c, codec=codec)
+        got, got_reading = sess.run(None, print_feeds.graph_feeds(noisy, r, c, codec))
+        assert got.shape == (3, c, r, r) and np.abs(got - want).max() < 1e-4, (r, c, codec)
+        assert np.allclose(got_reading, [reading.gain, reading.noise, reading.plane_rmse], rtol=1e-4)
+
+
+def test_print_graph_rejects_a_degenerate_band_combination_as_numpy_does():
+    """A severe photo (lego 48x4 in rocket, the decode bench's seed 1000) whose pilots make the combined filters
+    blow up to 1e22: numpy's float64 check rejects them; the float32 graph once took them (inf / inf) and
+    restored NaN planes. It must read the photo as numpy does."""
+    import cv2
+
+    from snapshot3d import print_feeds, print_layout
+    from snapshot3d.scanner.backgrounds import load_host
+    from snapshot3d.scanner.qr import scene_meta
+    from snapshot3d.scanner.scan import scan_image
+    from snapshot3d.scanner.sheet import render_sheet
+    from snapshot3d.scanner.simulate import simulate
+    from snapshot3d.scene import load_scene_file
+    from snapshot3d.viewer.runtime import model_path
+    scene = load_scene_file(Path(__file__).parents[1] / "bench" / "models" / "lego-print.s3d")
+    snap = print_layout.embed(load_host("builtin:rocket"), scene.planes())
+    data, _, _ = simulate(render_sheet(snap, scene_meta(scene, "print-2"), 2), "severe", 1000)
+    cap = scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+    r, c = scene.resolution, scene.channels
+    want, reading = print_layout.restore(*print_layout.despread(cap, r, c), r, c)
+    got, got_reading = ort.InferenceSession(str(model_path("restore-print"))).run(None, print_feeds.graph_feeds(cap, r, c))
+    assert np.isfinite(got).all() and np.abs(got - want).max() < 1e-4
+    assert np.allclose(got_reading, [reading.gain, reading.noise, reading.plane_rmse], rtol=1e-4)
+
+
 def test_shipped_models_are_current(tmp_path):
     """The models inside the package were exported from the shipped weights (same outputs), the restore graph
     of every file codec this build reads (older snapshots name older codecs) as well as the current one's."""
@@ -87,6 +157,12 @@ def test_shipped_models_are_current(tmp_path):
     fresh = FieldModels(ort.InferenceSession(str(project)), ort.InferenceSession(str(field)))
     for x, y in zip(grid_field(shipped, planes, 16, cells), grid_field(fresh, planes, 16, cells)):
         assert np.abs(x - y).max() < 1e-4
+    from snapshot3d import print_feeds
+    export_restore_print(tmp_path / "p.onnx")
+    feeds = print_feeds.graph_feeds((rng.uniform(0, 255, (380, 380, 3))).astype(np.uint8), 16, 4)
+    a = ort.InferenceSession(str(model_path("restore-print"))).run(None, feeds)
+    b = ort.InferenceSession(str(tmp_path / "p.onnx")).run(None, feeds)
+    assert all(np.abs(x - y).max() < 1e-5 for x, y in zip(a, b))
 
 
 def test_export_writes_the_restore_graph_of_every_file_codec():

@@ -20,6 +20,13 @@ CONTRACT = {  # kind: (inputs, outputs) as (name, shape, dtype); str dims are sy
                 [("tables", [3, None, 32], "tensor(float)")]),
     "field": ([("tables", [3, None, 32], "tensor(float)"), ("rows", [None, 3], "tensor(int64)")],
               [("density_logit", [None], "tensor(float)"), ("rgb", [None, 3], "tensor(float)")]),
+    "restore-print": ([("snapshot", [1, 3, 380, 380], "tensor(float)"), ("chips", ["N", "K"], "tensor(int64)"),
+                       ("base", ["N", "K"], "tensor(float)"), ("place", ["S"], "tensor(int64)"),
+                       ("scale", ["M"], "tensor(float)"), ("prior", ["M"], "tensor(float)"),
+                       ("pilots", [256], "tensor(float)"), ("folded", ["F"], "tensor(int64)"),
+                       ("fold_amp", ["F"], "tensor(float)"), ("dct", ["R", "R"], "tensor(float)"),
+                       ("prior_rest", [], "tensor(float)")],
+                      [("planes", [3, "C", "R", "R"], "tensor(float)"), ("reading", [3], "tensor(float)")]),
 }
 
 
@@ -120,12 +127,47 @@ def test_renderer_graphs_reproduce_the_vectors(vectors):
     assert logit.max() <= 15.0
 
 
+def _print_feeds(vectors):
+    """The restore-print graph's inputs from the vectors, as the page says: the capture / 255 in NCHW, the
+    index arrays as int64."""
+    feeds = {k[len("print_"):]: v.astype(np.int64) if v.dtype == np.int32 else v for k, v in vectors.items()
+             if k.startswith("print_") and k not in ("print_capture", "print_meta", "print_planes", "print_reading")}
+    feeds["snapshot"] = (vectors["print_capture"].astype(np.float32) / 255).transpose(2, 0, 1)[None]
+    return feeds
+
+
+def test_print_graph_reproduces_the_vectors(vectors):
+    """The print graph on the vectors' capture and layout gives their planes; the layout is still what the print
+    codec writes (a sheet printed long ago must still read), and its DCT matrix is the page's formula."""
+    from snapshot3d import print_feeds, print_layout
+    feeds = _print_feeds(vectors)
+    assert sorted(feeds) == sorted(print_feeds.PRINT_GRAPH_INPUTS)
+    planes, reading = _session("restore-print").run(None, feeds)
+    assert np.allclose(planes, vectors["print_planes"], atol=1e-4), np.abs(planes - vectors["print_planes"]).max()
+    assert np.allclose(reading, vectors["print_reading"], rtol=1e-4)
+    meta = str(vectors["print_meta"])
+    codec = meta.split("|")[1]
+    r, c = (int(v) for v in meta.split("|p=")[1].split("|")[0].split(","))
+    assert codec == "print-2" and planes.shape == (3, c, r, r)
+    for k, v in print_feeds.layout_feeds(print_layout.print_layout(r, c, codec)).items():
+        assert np.array_equal(v, feeds[k]), k
+    k, n = np.meshgrid(np.arange(r), np.arange(r), indexing="ij")   # D[k, n] from the page
+    d = np.sqrt(np.where(k == 0, 1.0, 2.0) / r) * np.cos(np.pi * (2 * n + 1) * k / (2 * r))
+    assert np.allclose(d, feeds["dct"], atol=1e-6)
+
+
 def test_vectors_are_the_product_path(vectors):
     """The committed vectors equal what the product's own code makes from the shipped models now."""
     from snapshot3d.export.conformance import make_vectors
-    fresh = make_vectors({k: model_path(k) for k in ("restore", "project", "field")})
+    fresh = make_vectors({k: model_path(k) for k in ("restore", "restore-print", "project", "field")})
+    assert sorted(fresh) == sorted(vectors)
     for k, v in vectors.items():
-        if k == "planes":   # 8-bit planes: a secret value on a rounding boundary may land one step (2/255) over on
+        if k == "print_capture":   # the scan of a photo: OpenCV's warps may round a rare pixel the other way elsewhere
+            d = np.abs(fresh[k].astype(int) - v.astype(int))
+            assert d.max() <= 1 and np.mean(d > 0) <= 1e-3, (k, d.max(), int((d > 0).sum()))
+        elif k == "print_planes":
+            assert np.abs(fresh[k] - v).max() < 0.02, k
+        elif k == "planes":   # 8-bit planes: a secret value on a rounding boundary may land one step (2/255) over on
             # another CPU's onnxruntime (measured: 2 of 98304 values on one machine, the secret within 4.9e-4)
             d = np.abs(fresh[k].astype(np.float32) - v.astype(np.float32))
             assert d.max() <= 2 / 255 + 1e-6 and np.mean(d > 2e-3) <= 1e-3, (k, d.max(), int((d > 2e-3).sum()))

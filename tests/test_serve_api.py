@@ -97,6 +97,33 @@ def test_downloads_scene_mesh_and_grid(decoded, tmp_path):
     assert gz.content == raw and len(gz.content) > 1e6  # the client unzipped what went over the wire as gzip
 
 
+def test_a_client_restores_a_print_by_itself_from_the_served_graph_and_layout(decoded, tmp_path):
+    """A phone app that restores on its own: the print restore graph and the layout its QR names, both from the
+    server, in onnxruntime on the scan of the photo, give the planes of the scene the server decoded."""
+    import io
+
+    import onnxruntime as ort
+
+    from snapshot3d.scene import load_scene_file, quantize_planes
+    from snapshot3d.viewer.decode import read_input
+    client, body = decoded
+    res, channels = body["report"]["planes"]
+    graph = client.get("/v1/models/restore-print.onnx")
+    layout = client.get(f"/v1/models/print-layout.npz?codec={body['report']['codec']}&res={res}&channels={channels}")
+    assert graph.status_code == layout.status_code == 200
+    with np.load(io.BytesIO(layout.content)) as z:
+        feeds = {k: z[k] for k in z.files}
+    _, capture, _, _ = read_input(PHOTO)
+    feeds["snapshot"] = (capture.astype(np.float32) / 255).transpose(2, 0, 1)[None]
+    planes, reading = ort.InferenceSession(graph.content, providers=["CPUExecutionProvider"]).run(None, feeds)
+    (tmp_path / "s.s3d").write_bytes(client.get(body["scene"]).content)
+    assert planes.shape == (3, channels, res, res) and 0 < reading[2] < 1
+    assert np.array_equal(quantize_planes(planes), load_scene_file(tmp_path / "s.s3d").codes)
+    _one_line_error(client.get("/v1/models/print-layout.npz?codec=hinet-3&res=16&channels=4"), 422, "unknown print codec")
+    _one_line_error(client.get("/v1/models/print-layout.npz?res=100&channels=4"), 422, "4x4 to 64x64")
+    _one_line_error(client.get("/v1/models/nope.onnx"), 404, "restore-print")
+
+
 def test_grid_file_round_trip_within_quantisation(decoded):
     from snapshot3d.scene import Orbit
     from snapshot3d.viewer.gridfile import LOGIT_FLOOR, encode_grid

@@ -25,7 +25,7 @@ from .quality import quality_estimate
 from .render import RenderConfig, pad_planes, render_views
 from .runtime import field_models
 
-__all__ = ["Decoded", "DecodedScene", "decode_scene", "decode_photo", "scene_from_meta"]
+__all__ = ["Decoded", "DecodedScene", "decode_scene", "decode_photo", "scene_from_meta", "read_input"]
 
 
 @dataclass
@@ -65,7 +65,7 @@ def _checked(meta):
     return meta
 
 
-def _read(path):
+def read_input(path):
     """(scan result or None, snapshot (380, 380, 3) uint8 RGB, metadata, what the file was) of a photo of a
     sheet, or of a snapshot file (its text metadata or the mark in its pixels; a copy re-encoded, resized or
     cropped by sharing is realigned)."""
@@ -101,7 +101,7 @@ class DecodedScene:
 def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
     """Scan (or read the snapshot file), restore and bake; the report has the timings of these stages."""
     t0 = time.perf_counter()
-    res, snapshot, meta, source = _read(path)
+    res, snapshot, meta, source = read_input(path)
     t1 = time.perf_counter()
     planes, codec_info = restore_planes(snapshot, meta)
     t2 = time.perf_counter()

@@ -1,7 +1,8 @@
 """Restoring planes from a (rectified) snapshot with the codec its metadata names, torch-free: the `file`
 medium's invertible network (one ONNX graph, then the least-squares unspread) or the `print` medium's
-designed carrier despreader (numpy: a linear receiver, and for `print-2` the posterior of its folded
-carriers). An unknown codec id is refused in one line.
+designed carrier receiver (one ONNX graph, `restore-print.onnx`, fed the layout of the snapshot's plane size
+and codec: a linear receiver, and for `print-2` the posterior of its folded carriers; the numpy code of
+`snapshot3d.print_layout` is its reference). An unknown codec id is refused in one line.
 
 Layouts: snapshot (380, 380, 3) uint8 RGB; planes (3, C, R, R) float32 in [-1, 1], rounded to the 8-bit
 values a scene carries."""
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from snapshot3d import codec_layout, formats, print_layout
+from snapshot3d import codec_layout, formats, print_feeds, print_layout
 from snapshot3d.errors import UserError
 from snapshot3d.scene import dequantize_planes, quantize_planes
 
@@ -35,33 +36,39 @@ def restore_file(snapshot: np.ndarray, res: int, channels: int, strength: float 
     return codec_layout.secret_to_planes(secret, res, channels)
 
 
-def restore_print(snapshot: np.ndarray, res: int, channels: int, run=None,
-                  codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, print_layout.Reading]:
+def restore_print(snapshot: np.ndarray, res: int, channels: int, graph=None,
+                  codec: str = formats.PRINT_CODEC, front=None) -> tuple[np.ndarray, print_layout.Reading]:
     """The print medium: the capture read carrier by carrier (matched filters shaped and weighted by the
-    capture's brightness), MMSE with the gain and noise the pilots measure. Returns planes and the pilots'
-    `Reading` (an estimate of the planes' error, no ground truth needed). `run` (x (1, 3, 380, 380) ->
-    payload estimate, same layout) puts a learned front-end before the filters: the bench's `print-front`
-    row; the product reads the capture itself, which measured better (README, "The print medium").
-    `codec`: the print codec id the snapshot names (its carriers)."""
-    if run is None:
-        return print_layout.restore(*print_layout.despread(snapshot, res, channels, codec=codec), res, channels, codec=codec)
-    restored = run(_nchw(snapshot))[0].transpose(1, 2, 0)
-    read, factor = print_layout.despread(restored, res, channels, capture=snapshot, codec=codec)
-    return print_layout.restore(read, factor, res, channels, codec=codec)
+    capture's brightness, the bands combined as the pilots measure them), MMSE with the gain and noise the
+    pilots measure, by the restore graph (`graph`: anything with an onnxruntime session's `run` in its place;
+    default the shipped `restore-print.onnx`). Returns planes and the pilots' `Reading` (an estimate of the
+    planes' error, no ground truth needed). `codec`: the print codec id the snapshot names (its carriers).
+    `front` (x (1, 3, 380, 380) -> payload estimate, same layout) puts a learned front-end before the numpy
+    receiver: the bench's `print-front` row; the product reads the capture itself, which measured better
+    (README, "The print medium")."""
+    if front is not None:
+        restored = front(_nchw(snapshot))[0].transpose(1, 2, 0)
+        read, factor = print_layout.despread(restored, res, channels, capture=snapshot, codec=codec)
+        return print_layout.restore(read, factor, res, channels, codec=codec)
+    sess = graph or session(str(model_path("restore-print")))
+    planes, reading = sess.run(None, print_feeds.graph_feeds(snapshot, res, channels, codec))
+    return planes, print_feeds.reading_of(reading)
 
 
 def restore_planes(snapshot: np.ndarray, meta, runners: dict | None = None) -> tuple[np.ndarray, dict]:
     """Planes (3, C, R, R) as carried (8-bit values) from a rectified snapshot and its metadata
     (`scanner.qr.SheetMeta`), with the codec the metadata names; and what the codec says of its own
     reading ({"plane_rmse_expected": ...} for the print codec, {} for the file codec). `runners` may
-    replace the ONNX graphs by kind (tests compare them with torch)."""
+    replace the ONNX graphs by kind ('restore', 'restore-print': tests compare them with torch and numpy)
+    or put a learned front-end before the print receiver ('print-front', the bench's)."""
     res, channels = meta.planes
     runners = runners or {}
     medium = formats.CODEC_MEDIUM.get(meta.codec)
     if medium == "file":
         planes, info = restore_file(snapshot, res, channels, meta.strength or 1.0, runners.get("restore"), meta.codec), {}
     elif medium == "print":
-        planes, reading = restore_print(snapshot, res, channels, runners.get("restore-print"), meta.codec)
+        planes, reading = restore_print(snapshot, res, channels, runners.get("restore-print"), meta.codec,
+                                         runners.get("print-front"))
         info = {"plane_rmse_expected": round(reading.plane_rmse, 4), "pilot_gain": round(reading.gain, 4),
                 "pilot_noise": float(f"{reading.noise:.4g}")}
     else:

@@ -25,8 +25,8 @@ class FieldModels:
 
 
 def model_path(kind: str, codec: str | None = None) -> Path:
-    """kind 'restore' (of `codec`, default the file medium's current one), 'project' or 'field' -> the
-    packaged model file."""
+    """kind 'restore' (of `codec`, default the file medium's current one), 'restore-print', 'project' or
+    'field' -> the packaged model file."""
     return asset(model_file(kind, codec))
 
 

@@ -30,6 +30,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from snapshot3d import __version__, formats
 from snapshot3d.errors import UserError
+from snapshot3d.print_feeds import layout_npz
 from snapshot3d.scanner.imageio_safe import image_size
 
 from .render import RenderConfig
@@ -42,6 +43,7 @@ __all__ = ["ApiError", "create_app", "STATIC"]
 
 STATIC = Path(__file__).resolve().parent / "static"
 DECODE_PATH = "/v1/decode"
+MODEL_ROUTES = ("restore", "restore-print", "project", "field")
 log = logging.getLogger("snapshot3d.serve")
 
 
@@ -248,12 +250,25 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
             return Response(gzip.decompress(data), media_type="application/octet-stream")
         return Response(data, media_type="application/octet-stream", headers={"Content-Encoding": "gzip"})
 
-    @app.get("/v1/models/{kind}.onnx", summary="the restore, project and field graphs (docs/onnx-contract.md)",
-             response_class=FileResponse)
+    @app.get("/v1/models/{kind}.onnx", summary="the restore (file medium), restore-print, project and field graphs "
+             "(docs/onnx-contract.md)", response_class=FileResponse)
     def model(kind: str):
-        if kind not in ("restore", "project", "field"):
-            raise ApiError(404, f"no model {kind!r} (restore, project or field)")
+        if kind not in MODEL_ROUTES:
+            raise ApiError(404, f"no model {kind!r} ({', '.join(MODEL_ROUTES)})")
         return FileResponse(model_path(kind), media_type="application/octet-stream")
+
+    @app.get("/v1/models/print-layout.npz", summary="the restore-print graph's layout inputs for one print codec and "
+             "plane size (numpy .npz; docs/onnx-contract.md section 4)", response_class=Response,
+             responses={200: {"content": {"application/octet-stream": {}}}})
+    def print_layout_inputs(codec: str = Query(formats.PRINT_CODEC, description="the print codec the QR names"),
+                            res: int = Query(..., description="plane resolution R (the QR's p=R,C)"),
+                            channels: int = Query(..., description="plane channels C")):
+        try:
+            data = layout_npz(codec, res, channels)
+        except ValueError as e:
+            raise ApiError(422, str(e)) from None
+        return Response(data, media_type="application/octet-stream",
+                        headers={"Cache-Control": "public, max-age=86400"})
 
     @app.get("/", include_in_schema=False)
     def page():
