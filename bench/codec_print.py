@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -71,17 +70,10 @@ def heldout_hosts(count: int) -> list[str]:
 def capture(snap: np.ndarray, meta, severity: str, seed: int, dots: int | None = None) -> np.ndarray | None:
     """The rectified snapshot `scan` gives from a simulated photo of the snapshot's sheet (None: not found);
     `dots` sets the printer's dots per snapshot pixel (the print's size)."""
-    from snapshot3d.scanner.presets import PRESETS
-    from snapshot3d.scanner.scan import scan_image
-    from snapshot3d.scanner.sheet import render_sheet
-    from snapshot3d.scanner.simulate import simulate
+    from snapshot3d.scanner.roundtrip import capture as scan_capture
 
-    preset = PRESETS[severity]
-    if preset.physical and dots is not None:
-        preset = replace(preset, print_dots_per_px=dots)
-    data, _, _ = simulate(render_sheet(snap, meta, 2), preset, seed)
     try:
-        return scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+        return scan_capture(snap, meta, severity, seed, print_dots=dots)
     except UserError:
         return None
 

@@ -105,13 +105,10 @@ def capture_seeds(severity: str, seeds: int):
 def through_channel(snap: np.ndarray, meta, severity: str, seed: int, dots: int = 4) -> np.ndarray | None:
     """snapshot (380, 380, 3) uint8 RGB -> the rectified snapshot `scan` gives from a simulated photo of
     its sheet (drawn at `dots` dots per snapshot pixel), or None when the sheet is not found."""
-    from snapshot3d.scanner.scan import scan_image
-    from snapshot3d.scanner.sheet import render_sheet
-    from snapshot3d.scanner.simulate import simulate
+    from snapshot3d.scanner.roundtrip import capture
 
-    data, _, _ = simulate(render_sheet(snap, meta, dots), severity, seed)
     try:
-        return scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+        return capture(snap, meta, severity, seed, sheet_dots=dots)
     except UserError:
         return None
 

@@ -33,6 +33,7 @@ POINTS = 64
 def make_vectors(models: dict, snapshot_png: Path = VECTORS_INPUT) -> dict:
     """models: kind -> .onnx path ('restore', 'project', 'field') -> the arrays above."""
     from snapshot3d import codec_layout
+    from snapshot3d.images import snapshot_nchw
     from snapshot3d.scanner.qr import encode_payload
     from snapshot3d.scanner.snapfile import read_snapshot
     from snapshot3d.scene import dequantize_planes, quantize_planes
@@ -42,8 +43,7 @@ def make_vectors(models: dict, snapshot_png: Path = VECTORS_INPUT) -> dict:
 
     rgb, meta = read_snapshot(snapshot_png, None)
     res, channels = meta.planes
-    x = (rgb.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
-    secret = session(str(models["restore"])).run(None, {"snapshot": x})[0][0]
+    secret = session(str(models["restore"])).run(None, {"snapshot": snapshot_nchw(rgb)})[0][0]
     planes = dequantize_planes(quantize_planes(codec_layout.secret_to_planes(secret / (meta.strength or 1.0), res,
                                                                              channels)))
     interp = interp_matrix(cell_coords(GRID), res)

@@ -63,6 +63,7 @@ def restore_parity(restore_path, project_path, field_path, size: int = 96, codec
     the ORT graph at `restore_path` (same renderer)."""
     from snapshot3d import codec_layout
     from snapshot3d.cameras import orbit_cameras
+    from snapshot3d.images import snapshot_nchw
     from snapshot3d.metrics import psnr
     from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scene import dequantize_planes, quantize_planes
@@ -74,8 +75,7 @@ def restore_parity(restore_path, project_path, field_path, size: int = 96, codec
     net, _ = load_codec(codec_path(codec))
     snap = embed_planes(net, load_host("builtin:coffee"), scene.planes())
     sec_torch = restore_secret(net, snap)
-    x = (snap.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
-    sec_ort = session(str(restore_path)).run(None, {"snapshot": np.ascontiguousarray(x)})[0][0]
+    sec_ort = session(str(restore_path)).run(None, {"snapshot": snapshot_nchw(snap)})[0][0]
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
     models = _ort_field_models(project_path, field_path)
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, size, size)
@@ -93,17 +93,13 @@ def print_parity(graph_path, project_path, field_path, size: int = 96, severity:
     from (`print_layout.despread` + `restore`): the shipped print scene hidden in a bundled host, read from the
     lossless snapshot and from the scan of a simulated `severity` photo of its sheet, both codecs' layouts;
     the planes' largest difference, the share of 8-bit codes that differ, and restore_psnr each way."""
-    import cv2
-
     from snapshot3d import print_feeds, print_layout
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.metrics import psnr
     from snapshot3d.paths import asset
     from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scanner.qr import scene_meta
-    from snapshot3d.scanner.scan import scan_image
-    from snapshot3d.scanner.sheet import render_sheet
-    from snapshot3d.scanner.simulate import simulate
+    from snapshot3d.scanner.roundtrip import capture
     from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
     from snapshot3d.viewer.render import render_views
     from snapshot3d.viewer.runtime import session
@@ -117,8 +113,7 @@ def print_parity(graph_path, project_path, field_path, size: int = 96, severity:
     out = {}
     for codec in formats.PRINT_CODECS:
         snap = print_layout.embed(load_host("builtin:coffee"), scene.planes(), codec=codec)
-        data, _, _ = simulate(render_sheet(snap, scene_meta(scene, codec), 4), severity, 0)
-        photo = scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+        photo = capture(snap, scene_meta(scene, codec), severity, 0, sheet_dots=4)
         for name, img in (("lossless", snap), (severity, photo)):
             want, reading = print_layout.restore(*print_layout.despread(img, r, c, codec=codec), r, c, codec=codec)
             got, got_reading = graph.run(None, print_feeds.graph_feeds(img, r, c, codec))

@@ -1,4 +1,5 @@
-"""Writing views: PNG files, an animated GIF turntable and a contact sheet (numpy, OpenCV, Pillow).
+"""Writing views: PNG files, an animated GIF turntable and a contact sheet (numpy, OpenCV, Pillow); and a
+snapshot as the restore graphs take it (`snapshot_nchw`).
 
 Views are (N, H, W, 3) float32 RGB in [0, 1] or uint8 RGB."""
 from __future__ import annotations
@@ -10,13 +11,18 @@ import cv2
 import numpy as np
 from PIL import Image
 
-__all__ = ["to_uint8", "fit_square", "write_png", "write_views", "write_gif", "contact_sheet"]
+__all__ = ["to_uint8", "snapshot_nchw", "fit_square", "write_png", "write_views", "write_gif", "contact_sheet"]
 
 
 def to_uint8(img: np.ndarray) -> np.ndarray:
     if img.dtype == np.uint8:
         return img
     return (np.clip(img, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def snapshot_nchw(rgb: np.ndarray) -> np.ndarray:
+    """A snapshot (H, W, 3) uint8 RGB -> the restore graphs' `snapshot` input (1, 3, H, W) float32 in [0, 1]."""
+    return np.ascontiguousarray((rgb.astype(np.float32) / 255.0).transpose(2, 0, 1)[None])
 
 
 def fit_square(img: np.ndarray, size: int) -> np.ndarray:

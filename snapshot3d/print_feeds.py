@@ -26,9 +26,10 @@ from functools import lru_cache
 import numpy as np
 
 from . import formats, print_layout
+from .images import snapshot_nchw
 
 __all__ = ["LAYOUT_INPUTS", "PRINT_GRAPH_INPUTS", "PRINT_GRAPH_OUTPUTS", "dct_matrix", "layout_feeds",
-           "graph_feeds", "snapshot_input", "reading_of", "layout_npz"]
+           "graph_feeds", "reading_of", "layout_npz"]
 
 LAYOUT_INPUTS = ["chips", "base", "place", "scale", "prior", "pilots", "folded", "fold_amp", "dct", "prior_rest"]
 PRINT_GRAPH_INPUTS = ["snapshot"] + LAYOUT_INPUTS
@@ -61,18 +62,13 @@ def layout_feeds(lay: print_layout.PrintLayout) -> dict[str, np.ndarray]:
             "prior_rest": np.array(rest, np.float32)}
 
 
-def snapshot_input(snapshot: np.ndarray) -> np.ndarray:
-    """A rectified capture (380, 380, 3) uint8 RGB -> the graph's `snapshot` (1, 3, 380, 380) float32 in [0, 1]."""
-    n = formats.SNAPSHOT_SIZE
-    if snapshot.shape != (n, n, 3) or snapshot.dtype != np.uint8:
-        raise ValueError(f"a print capture is ({n}, {n}, 3) uint8 RGB, got {snapshot.shape} {snapshot.dtype}")
-    return np.ascontiguousarray((snapshot.astype(np.float32) / 255.0).transpose(2, 0, 1)[None])
-
-
 def graph_feeds(snapshot: np.ndarray, res: int, channels: int, codec: str = formats.PRINT_CODEC) -> dict:
     """All inputs of the restore graph for a capture (380, 380, 3) uint8 RGB of (3, channels, res, res)
     planes under print codec `codec`."""
-    return {"snapshot": snapshot_input(snapshot), **layout_feeds(print_layout.print_layout(res, channels, codec))}
+    n = formats.SNAPSHOT_SIZE
+    if snapshot.shape != (n, n, 3) or snapshot.dtype != np.uint8:
+        raise ValueError(f"a print capture is ({n}, {n}, 3) uint8 RGB, got {snapshot.shape} {snapshot.dtype}")
+    return {"snapshot": snapshot_nchw(snapshot), **layout_feeds(print_layout.print_layout(res, channels, codec))}
 
 
 def reading_of(reading: np.ndarray) -> print_layout.Reading:

@@ -114,20 +114,15 @@ def test_print_graph_rejects_a_degenerate_band_combination_as_numpy_does():
     """A severe photo (lego 48x4 in rocket, the decode bench's seed 1000) whose pilots make the combined filters
     blow up to 1e22: numpy's float64 check rejects them; the float32 graph once took them (inf / inf) and
     restored NaN planes. It must read the photo as numpy does."""
-    import cv2
-
     from snapshot3d import print_feeds, print_layout
     from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scanner.qr import scene_meta
-    from snapshot3d.scanner.scan import scan_image
-    from snapshot3d.scanner.sheet import render_sheet
-    from snapshot3d.scanner.simulate import simulate
+    from snapshot3d.scanner.roundtrip import capture
     from snapshot3d.scene import load_scene_file
     from snapshot3d.viewer.runtime import model_path
     scene = load_scene_file(Path(__file__).parents[1] / "bench" / "models" / "lego-print.s3d")
     snap = print_layout.embed(load_host("builtin:rocket"), scene.planes())
-    data, _, _ = simulate(render_sheet(snap, scene_meta(scene, "print-2"), 2), "severe", 1000)
-    cap = scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+    cap = capture(snap, scene_meta(scene, "print-2"), "severe", 1000)
     r, c = scene.resolution, scene.channels
     want, reading = print_layout.restore(*print_layout.despread(cap, r, c), r, c)
     got, got_reading = ort.InferenceSession(str(model_path("restore-print"))).run(None, print_feeds.graph_feeds(cap, r, c))

@@ -20,17 +20,12 @@ def _rmse(a, b):
 
 @pytest.fixture(scope="module")
 def captured():
-    import cv2
-
-    from snapshot3d.scanner.scan import scan_image
-    from snapshot3d.scanner.sheet import render_sheet
-    from snapshot3d.scanner.simulate import simulate
+    from snapshot3d.scanner.roundtrip import capture
 
     scene = load_scene_file(asset("spot-print.s3d"))
     host = load_host("builtin:chelsea")
     snap = pl.embed(host, scene.planes())
-    data, _, _ = simulate(render_sheet(snap, scene_meta(scene, formats.PRINT_CODEC), 4), "moderate", 1)
-    cap = scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+    cap = capture(snap, scene_meta(scene, formats.PRINT_CODEC), "moderate", 1, sheet_dots=4)
     return scene, host, snap, cap
 
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from snapshot3d import codec_layout, formats, print_feeds, print_layout
 from snapshot3d.errors import UserError
+from snapshot3d.images import snapshot_nchw
 from snapshot3d.scene import dequantize_planes, quantize_planes
 
 from .runtime import model_path, session
@@ -25,14 +26,10 @@ def onnx_runner(kind: str, codec: str | None = None):
     return lambda x: sess.run(None, {"snapshot": np.ascontiguousarray(x, np.float32)})[0]
 
 
-def _nchw(snapshot: np.ndarray) -> np.ndarray:
-    return (snapshot.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
-
-
 def restore_file(snapshot: np.ndarray, res: int, channels: int, strength: float = 1.0, run=None,
                  codec: str = formats.FILE_CODEC) -> np.ndarray:
     """The file medium: planes from the secret of `codec`'s invertible network (`run` replaces its ONNX graph)."""
-    secret = (run or onnx_runner("restore", codec))(_nchw(snapshot))[0] / strength
+    secret = (run or onnx_runner("restore", codec))(snapshot_nchw(snapshot))[0] / strength
     return codec_layout.secret_to_planes(secret, res, channels)
 
 
@@ -47,7 +44,7 @@ def restore_print(snapshot: np.ndarray, res: int, channels: int, graph=None,
     receiver: the bench's `print-front` row; the product reads the capture itself, which measured better
     (README, "The print medium")."""
     if front is not None:
-        restored = front(_nchw(snapshot))[0].transpose(1, 2, 0)
+        restored = front(snapshot_nchw(snapshot))[0].transpose(1, 2, 0)
         read, factor = print_layout.despread(restored, res, channels, capture=snapshot, codec=codec)
         return print_layout.restore(read, factor, res, channels, codec=codec)
     sess = graph or session(str(model_path("restore-print")))

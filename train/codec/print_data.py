@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import os
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -94,11 +94,8 @@ def make_capture(host_spec: str, seed: int, cfg: CaptureConfig = CaptureConfig()
     """One training pair: (capture (380, 380, 3) uint8, snapshot (380, 380, 3) uint8, info dict), or None
     when `scan` does not find the sheet in the photo."""
     from snapshot3d import print_layout
-    from snapshot3d.scanner.presets import PRESETS
     from snapshot3d.scanner.qr import SheetMeta
-    from snapshot3d.scanner.scan import scan_image
-    from snapshot3d.scanner.sheet import render_sheet
-    from snapshot3d.scanner.simulate import simulate
+    from snapshot3d.scanner.roundtrip import capture as scan_capture
 
     rng = np.random.default_rng([cfg.seed, seed])
     res, ch = _PLANES[rng.integers(len(_PLANES))]
@@ -108,13 +105,9 @@ def make_capture(host_spec: str, seed: int, cfg: CaptureConfig = CaptureConfig()
     snap = print_layout.embed(host, planes, target_db, codec=FRONT_END_CODEC)
     severity = str(rng.choice(_SEVERITIES, p=_SEVERITY_P))
     dots = int(rng.choice(_DOTS))
-    preset = PRESETS[severity]
-    if preset.physical:
-        preset = replace(preset, print_dots_per_px=dots)
     meta = SheetMeta(codec=FRONT_END_CODEC, box=(-1, -1, -1, 1, 1, 1), orbit=(3.0, 20.0, 40.0), planes=(res, ch))
-    data, _, _ = simulate(render_sheet(snap, meta, 2), preset, int(rng.integers(2 ** 31)))
     try:
-        capture = scan_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)).snapshot
+        capture = scan_capture(snap, meta, severity, int(rng.integers(2 ** 31)), print_dots=dots)
     except UserError:
         return None
     info = {"host": Path(host_spec).name, "severity": severity, "dots": dots, "planes": [int(res), int(ch)],
