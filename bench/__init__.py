@@ -3,4 +3,4 @@ experiments. Each module writes CSV, JSON and PNG under `bench/results/` with th
 Product packages (`snapshot3d` core, `scanner`, `viewer`, `train`, `export`) never import this package
 (`tests/test_layers.py` proves it); it sits on top and may import any of them."""
 
-__all__ = ["fit", "scan", "channel", "codec", "codec_jpeg", "capacity", "decode", "common"]
+__all__ = ["fit", "scan", "channel", "codec", "codec_jpeg", "capacity", "capacity_model", "oracle", "decode", "common"]

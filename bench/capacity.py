@@ -3,7 +3,7 @@
 For each scene (spot at several plane sizes) and held-out host, the shipped codec's snapshot goes
 through every severity (`simulate` + `scan`, seeds for the physical ones). From each capture:
 the codec's `restore_psnr` (20 orbit views at 128x128), and the channel's gain and noise per subband
-(`train.capacity`), hence its Gaussian capacity at the host-fidelity targets. Each scene's curve of
+(`bench.capacity_model`), hence its Gaussian capacity at the host-fidelity targets. Each scene's curve of
 `restore_psnr` against i.i.d. plane noise turns the best plane error that capacity allows into the
 best `restore_psnr` any codec could reach at that host fidelity (under the module's assumptions).
 Writes capacity.{csv,json,png}: left, `restore_psnr` per severity, measured with the shipped
@@ -22,11 +22,10 @@ from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import scene_meta
-from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
-from snapshot3d.train.codec.capacity import best_plane_rmse, capacity_bits, fit_channel
+from snapshot3d.scene import load_scene_file
 from snapshot3d.train.codec.hinet import embed_planes, load_codec, restore_secret
-from snapshot3d.train.codec.oracle import oracle_correct
 
+from .capacity_model import best_plane_rmse, capacity_bits, fit_channel, noise_curve, psnr_at
 from .codec import TARGETS
 from .common import (
     SEVERITIES,
@@ -36,33 +35,14 @@ from .common import (
     through_channel,
     write_report,
 )
+from .oracle import oracle_correct
 
-__all__ = ["bench_capacity_command", "HOST_TARGETS", "NOISE_SIGMAS", "noise_curve", "psnr_at", "write_capacity_chart"]
+__all__ = ["bench_capacity_command", "HOST_TARGETS", "write_capacity_chart"]
 
 HOST_TARGETS = (38.0, 34.0, 30.0)
 # the host-fidelity target each severity is judged at (issue 4; jpeg90 and severe name none: the nearest)
 SEVERITY_HOST = {"none": 38.0, "jpeg90": 34.0, "jpeg75": 34.0, "mild": 30.0, "moderate": 30.0, "severe": 30.0}
-NOISE_SIGMAS = (0.004, 0.01, 0.02, 0.04, 0.07, 0.1, 0.15, 0.2, 0.3, 0.45)
 _CROP = 2  # 380 -> 376 = 47 * 8, for three Haar levels
-
-
-def noise_curve(judge: ViewJudge, seed: int = 0) -> list[tuple[float, float]]:
-    """(plane RMS error, restore_psnr) of the scene's planes plus i.i.d. Gaussian noise, as carried (8-bit)."""
-    rng = np.random.default_rng(seed)
-    planes = judge.scene.planes()
-    out = []
-    for sigma in NOISE_SIGMAS:
-        noisy = dequantize_planes(quantize_planes(planes + rng.normal(0, sigma, planes.shape).astype(np.float32)))
-        rmse = float(np.sqrt(np.mean((noisy - planes) ** 2)))
-        out.append((rmse, psnr(judge.views(noisy), judge.ref)))
-    return out
-
-
-def psnr_at(curve: list[tuple[float, float]], rmse: float) -> float:
-    """restore_psnr at a plane RMS error, interpolated on log(rmse); clamped to the measured range."""
-    x = np.log([c[0] for c in curve])
-    y = np.array([c[1] for c in curve])
-    return float(np.interp(np.log(max(rmse, 1e-9)), x, y))
 
 
 def _capture_rows(net, judge, sname, hname, host, seeds) -> list[dict]:
@@ -135,7 +115,7 @@ def bench_capacity_command(args) -> int:
         "view_size": args.size, "codec": formats.FILE_CODEC, "hosts": args.hosts.split(","),
         "severity_host_target": SEVERITY_HOST,
         "assumptions": "Gaussian noise per subband (opponent colour x 3 Haar levels), dirty-paper embedding, "
-                       "Gaussian plane source; see snapshot3d/train/capacity.py",
+                       "Gaussian plane source; see bench/capacity_model.py",
         "scenes": bounds})
     write_capacity_chart(bounds, Path(args.out) / "capacity.png", os.cpu_count())
     if not args.quick:

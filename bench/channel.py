@@ -27,6 +27,8 @@ from snapshot3d.scanner.scan import scan_image
 from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
 
+from .common import run_metadata
+
 __all__ = ["measure_residual", "bench_channel_command"]
 
 _SIGMAS = np.arange(0.0, 3.01, 0.1)
@@ -105,7 +107,7 @@ def bench_channel_command(args) -> int:
         w.writeheader()
         w.writerows(rows)
     doc = {"command": "snapshot3d bench channel " + f"--seeds {args.seeds} --severities {args.severities}",
-           "cores": os.cpu_count(), "host": "astronaut", "summary": summary}
+           "cores": os.cpu_count(), "meta": run_metadata(), "host": "astronaut", "summary": summary}
     (out / "channel.json").write_text(json.dumps(doc, indent=2) + "\n")
     for sev, s in summary.items():
         print(sev, {k: round(v["median"], 3) for k, v in s.items() if isinstance(v, dict)})

@@ -24,7 +24,8 @@ import cv2
 import numpy as np
 import torch
 
-from snapshot3d import codec_layout, formats
+from snapshot3d import formats
+from snapshot3d.codecs import file_layout
 from snapshot3d.errors import UserError
 from snapshot3d.images import write_png
 from snapshot3d.metrics import ssim
@@ -47,6 +48,7 @@ from .common import (
     median,
     psnr,
     pyplot,
+    run_metadata,
     through_channel,
     write_rows,
 )
@@ -127,7 +129,7 @@ def _views_rows(net, judge, scene_name, host_name, host, severities, counts=(3, 
             row = {"method": f"views-{n}", "scene": scene_name, "host": host_name, "severity": sev, "seed": 0,
                    "views": n, "host_psnr": psnr(snap / 255, host8 / 255), "detected": int(rect is not None)}
             if rect is not None:
-                got = codec_layout.secret_to_planes(restore_secret(net, rect), side, formats.CODEC_CHANNELS)
+                got = file_layout.secret_to_planes(restore_secret(net, rect), side, formats.CODEC_CHANNELS)
                 carried = (got.reshape(-1, side, side)[:3 * n].reshape(n, 3, side, side).transpose(0, 2, 3, 1) + 1) / 2
                 row["carried_psnr"] = psnr(np.clip(carried, 0, 1), small[idx])
                 # every other orbit view can only be shown as the nearest carried one
@@ -183,7 +185,7 @@ def side_by_side(net, scene, host, judge, out: Path, refine: int = 0) -> None:
     pick = [0, 5, 10, 15]
     rows = [judge.ref[pick]]
     for rect in (jpeg, photo):
-        planes = codec_layout.secret_to_planes(restore_secret(net, rect), scene.resolution, scene.channels)
+        planes = file_layout.secret_to_planes(restore_secret(net, rect), scene.resolution, scene.channels)
         rows.append(judge.views(dequantize_planes(quantize_planes(planes)))[pick])
     s = judge.size
     tiles = [np.concatenate(list(r), axis=1) for r in rows]
@@ -322,7 +324,7 @@ def _bench_file_codec(args) -> int:
     headline = [s for s in args.headline.split(",") if s in scenes]
     summary = summarise(rows, headline or None)
     doc = {"command": "snapshot3d " + " ".join(__import__("sys").argv[1:]), "cores": os.cpu_count(),
-           "torch_threads": torch.get_num_threads(), "view_size": args.size,
+           "meta": run_metadata(), "torch_threads": torch.get_num_threads(), "view_size": args.size,
            "codec": {"version": formats.FILE_CODEC, "blocks": cfg.blocks, "width": cfg.width},
            "targets": TARGETS, "headline_scenes": headline, "summary": summary,
            "by_scene": {name: summarise(rows, [name]) for name in scenes}, "arch": [r for r in rows if r["method"] == "arch"]}

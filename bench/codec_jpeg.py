@@ -15,8 +15,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from snapshot3d import codec_layout, formats
+from snapshot3d import formats
 from snapshot3d.cameras import orbit_cameras
+from snapshot3d.codecs import file_layout
 from snapshot3d.metrics import psnr
 from snapshot3d.paths import asset
 from snapshot3d.scanner.backgrounds import load_host
@@ -95,7 +96,7 @@ def bench_codec_jpeg_command(args) -> int:
             snap = snapshot_of(net, load_host("builtin:" + host), scene.planes(), refine)
             for name, fn in DISTORTIONS.items():
                 seen = fn(snap)
-                planes = codec_layout.secret_to_planes(restore_secret(net, seen), scene.resolution, scene.channels)
+                planes = file_layout.secret_to_planes(restore_secret(net, seen), scene.resolution, scene.channels)
                 views = render_views(models, dequantize_planes(quantize_planes(planes)), scene.box, c2w, intr, SIZE, SIZE)
                 rows.append({"codec": label, "host": host, "distortion": name,
                              "image_psnr": min(psnr(seen / 255.0, snap / 255.0), 100.0),  # 100: identical

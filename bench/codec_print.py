@@ -26,7 +26,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from snapshot3d import formats, print_layout
+from snapshot3d import formats
+from snapshot3d.codecs import print_source
+from snapshot3d.codecs.media import MEDIA
 from snapshot3d.errors import UserError
 from snapshot3d.images import write_png
 from snapshot3d.metrics import ssim
@@ -117,7 +119,7 @@ def _front_end():
 
 def _snapshot(method: str, host: np.ndarray, scene, strength: float = 1.0) -> np.ndarray:
     """The snapshot `embed` writes (metadata mark included; the file codec unrefined)."""
-    from snapshot3d.train.codec.commands import snapshot_for
+    from snapshot3d.train.codec.embedding import snapshot_for
     return snapshot_for("file" if method == "file" else "print", host, scene, strength)
 
 
@@ -128,7 +130,7 @@ def _rows(methods, scene, sname, hname, host, severities, seeds, judge, e2e, str
         if method == "print-front":
             continue  # read from the `print` captures below
         snap = _snapshot(method, host, scene, strength)
-        codec = formats.MEDIUM_CODEC["file" if method == "file" else "print"]
+        codec = MEDIA["file" if method == "file" else "print"].codec
         meta = scene_meta(scene, codec, strength)
         base = {"group": group, "scene": sname, "host": hname, "strength": strength, "dots": dots,
                 "host_psnr": psnr(snap / 255, host8 / 255), "host_ssim": ssim(snap / 255, host8 / 255)}
@@ -163,14 +165,12 @@ def summarise(rows: list[dict], group: str = "main") -> dict:
 
 def _bound(scene, judge, kb: float) -> float:
     """The best restore_psnr `kb` kB of Gaussian capacity allows for the scene's planes (bench capacity)."""
-    from snapshot3d.train.codec.capacity import best_plane_rmse
-
-    from .capacity import noise_curve, psnr_at
+    from .capacity_model import best_plane_rmse, noise_curve, psnr_at
     planes = scene.planes()
     return psnr_at(noise_curve(judge), best_plane_rmse(kb * 8000.0, planes.size, float(np.var(planes))))
 
 
-def _capacity_kb(severity: str = "moderate", host_db: float = print_layout.HOST_PSNR) -> float | None:
+def _capacity_kb(severity: str = "moderate", host_db: float = print_source.HOST_PSNR) -> float | None:
     """The channel's capacity at `severity` from bench/results/capacity.json, interpolated (in log kB) to
     `host_db` between the host targets it was measured at."""
     path = Path("bench/results/capacity.json")
@@ -258,7 +258,7 @@ def bench_codec_print_command(args) -> int:
         "view_size": args.size, "codec": formats.PRINT_CODEC, "targets": TARGETS, "hosts": list(hosts),
         "scenes": list(scenes), "seconds": round(time.time() - t0, 1), "summary": summary,
         "by_scene": {s: summarise([r for r in rows if r["scene"] == s]) for s in scenes},
-        "payload_vs_bound": {"capacity_kb_moderate_at_host_psnr": kb, "host_psnr": print_layout.HOST_PSNR,
+        "payload_vs_bound": {"capacity_kb_moderate_at_host_psnr": kb, "host_psnr": print_source.HOST_PSNR,
                              "scenes": payload},
         "strength": summarise(rows, "strength"), "print_size": {f"{mm} mm": summarise(rows, f"print-{mm}mm")
                                                                for mm in PRINT_SIZES_MM}})

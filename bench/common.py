@@ -20,9 +20,9 @@ from snapshot3d.metrics import psnr as _psnr
 
 __all__ = ["SEVERITIES", "PHYSICAL", "write_report", "write_rows", "psnr", "median", "capture_seeds",
            "through_channel", "ViewJudge", "pyplot", "bench_progress", "update_budget_curve", "RowBlocks",
-           "jpeg_copy"]
+           "jpeg_copy", "run_metadata"]
 
-SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")
+SEVERITIES = formats.SEVERITIES
 PHYSICAL = ("mild", "moderate", "severe")
 
 
@@ -35,13 +35,49 @@ def write_rows(path: Path, rows: list[dict], fields: list[str] | None = None) ->
         w.writerows(rows)
 
 
+def run_metadata() -> dict:
+    """What every results JSON records about the run that wrote it (its "meta" entry): the UTC date and
+    time, the commit (`git rev-parse --short HEAD`, with "+dirty" when the tree has changes; "unknown"
+    outside a git checkout), os.cpu_count(), the platform, and the versions of python, numpy, opencv,
+    onnxruntime and torch (torch only when this run imported it; "not installed" when absent)."""
+    import datetime
+    import platform
+    import subprocess
+    from importlib import metadata
+
+    def git(*args: str) -> str | None:
+        try:
+            proc = subprocess.run(["git", *args], capture_output=True, text=True, timeout=10,
+                                  cwd=Path(__file__).resolve().parent)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return proc.stdout.strip() if proc.returncode == 0 else None
+
+    def version(dist: str) -> str:
+        try:
+            return metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            return "not installed"
+
+    commit = git("rev-parse", "--short", "HEAD")
+    if commit and git("status", "--porcelain", "--untracked-files=no"):
+        commit += "+dirty"
+    versions = {"python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
+                "onnxruntime": version("onnxruntime")}
+    if "torch" in sys.modules:
+        versions["torch"] = sys.modules["torch"].__version__
+    return {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            "commit": commit or "unknown", "cores": os.cpu_count(), "machine": platform.platform(),
+            "versions": versions}
+
+
 def write_report(out: Path, stem: str, rows: list[dict], doc: dict) -> dict:
-    """Write out/stem.csv (rows) and out/stem.json (`doc` after "command" and "cores"); returns the JSON
-    document."""
+    """Write out/stem.csv (rows) and out/stem.json (`doc` after "command", "cores" and "meta", see
+    `run_metadata`); returns the JSON document."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_rows(out / f"{stem}.csv", rows)
-    doc = {"command": "snapshot3d " + " ".join(sys.argv[1:]), "cores": os.cpu_count(), **doc}
+    doc = {"command": "snapshot3d " + " ".join(sys.argv[1:]), "cores": os.cpu_count(), "meta": run_metadata(), **doc}
     (out / f"{stem}.json").write_text(json.dumps(doc, indent=2) + "\n")
     return doc
 
@@ -139,8 +175,8 @@ class ViewJudge:
 
     def restore_psnr(self, secret: np.ndarray) -> float:
         """restore_psnr of the file codec's restored secret (24, G, G)."""
-        from snapshot3d import codec_layout
-        return self.planes_psnr(codec_layout.secret_to_planes(secret, self.scene.resolution, self.scene.channels))
+        from snapshot3d.codecs import file_layout
+        return self.planes_psnr(file_layout.secret_to_planes(secret, self.scene.resolution, self.scene.channels))
 
 
 def pyplot():

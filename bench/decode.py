@@ -28,6 +28,7 @@ import numpy as np
 
 from snapshot3d import formats
 from snapshot3d.cameras import orbit_cameras
+from snapshot3d.codecs.media import PRINT, medium_of
 from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr
 from snapshot3d.paths import asset
@@ -42,14 +43,14 @@ from snapshot3d.viewer.quality import calibration_file, predictor_value
 from snapshot3d.viewer.render import RenderConfig, render_views
 from snapshot3d.viewer.runtime import field_models
 
-from .common import pyplot, write_rows
+from .common import pyplot, run_metadata, write_rows
 
 __all__ = ["bench_decode_command", "CALIB_SEVERITIES", "fit_calibration"]
 
 # the default (RenderConfig: samples 16, bake 96, probe_div 4, size 380) is measured once, as "default"
 SWEEP = [("samples", v) for v in (4, 8, 12, 24, 32)] + [("bake", v) for v in (32, 64, 128, 160)] + \
         [("probe_div", v) for v in (2, 8)] + [("size", v) for v in (190, 285)]
-CALIB_SEVERITIES = ("jpeg90", "jpeg75", "mild", "moderate", "severe")
+CALIB_SEVERITIES = tuple(s for s in formats.SEVERITIES if s != "none")   # every capture but the lossless copy
 CALIB_SEED0 = 1000
 FIT_HOSTS = ("builtin:astronaut", "builtin:rocket")          # calibration fits on these (training hosts)
 CHECK_HOSTS = ("builtin:coffee", "builtin:chelsea")          # and is scored on these (held out)
@@ -74,8 +75,8 @@ def _pareto(points):
 
 def _snapshot(scene, codec: str, host: np.ndarray) -> np.ndarray:
     if codec == formats.PRINT_CODEC:
-        from snapshot3d import print_layout
-        return print_layout.embed(host, scene.planes())
+        from snapshot3d.codecs import print_embed
+        return print_embed.embed(host, scene.planes())
     from snapshot3d.train.codec.hinet import embed_planes, load_codec
     return embed_planes(load_codec()[0], host, scene.planes())
 
@@ -94,7 +95,7 @@ def fit_calibration(fit_rows: list[dict], check_rows: list[dict], codec: str) ->
     slope, intercept = np.polyfit(x, y, 1)
     xe, ye = np.array([r["predictor"] for r in check_rows]), np.array([r["restore_psnr"] for r in check_rows])
     pred = intercept + slope * np.clip(xe, x.min(), x.max())
-    name = "log10(plane_rmse_expected)" if formats.CODEC_MEDIUM[codec] == "print" else "pilot_psnr (markers, dB)"
+    name = "log10(plane_rmse_expected)" if medium_of(codec) is PRINT else "pilot_psnr (markers, dB)"
     return {"codec": codec, "predictor": name, "slope": float(slope), "intercept": float(intercept),
             "range": [float(x.min()), float(x.max())], "fit_corr": float(np.corrcoef(x, y)[0, 1]),
             "held_out_corr": float(np.corrcoef(xe, ye)[0, 1]) if len(xe) > 2 and np.std(xe) > 0 else None,
@@ -111,12 +112,12 @@ def _against_numpy(photo: Path, codes: np.ndarray) -> tuple[dict, np.ndarray]:
     """The print restore graph's 8-bit planes `codes` (as `decode` restored `photo`) against the numpy receiver
     it was written from, on the same scan: the share of codes that differ, their largest difference, and the
     numpy receiver's time (ms); and the scan."""
-    from snapshot3d import print_layout
+    from snapshot3d.codecs import print_read
     from snapshot3d.viewer.decode import read_input
 
     _, capture, meta, _ = read_input(photo)
     t0 = time.perf_counter()
-    planes, _ = print_layout.restore(*print_layout.despread(capture, *meta.planes, codec=meta.codec), *meta.planes,
+    planes, _ = print_read.restore(*print_read.despread(capture, *meta.planes, codec=meta.codec), *meta.planes,
                                      codec=meta.codec)
     ms = (time.perf_counter() - t0) * 1e3
     d = np.abs(quantize_planes(planes).astype(int) - codes.astype(int))
@@ -219,7 +220,8 @@ def bench_decode_command(args) -> int:
                "restore_psnr_median": med("restore_psnr"), "e2e_psnr_median": med("e2e_psnr"),
                "quality_estimate": calibrations,
                "pareto": [f"{sweep[i]['setting']}={sweep[i]['value']}" for i in front], "default_on_front": 0 in front}
-    doc = {"command": "snapshot3d " + " ".join(sys.argv[1:]), "cores": os.cpu_count(), "scene": args.scene,
+    doc = {"command": "snapshot3d " + " ".join(sys.argv[1:]), "cores": os.cpu_count(),
+           "meta": run_metadata(), "scene": args.scene,
            "severity": args.severity, "sweep_severity": args.sweep_severity, "host": args.host,
            "targets": {"decode_ms_median": "<= 2000", "first_view_ms": "<= 500"}, "summary": summary}
     write_rows(out / "decode.csv", rows)

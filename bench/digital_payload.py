@@ -1,11 +1,11 @@
 """A digital payload for the print medium, the candidate issue 12 asks to measure against the designed analog
-carriers (`snapshot3d.print_layout`): the planes quantised and sent as bits with error correction and a CRC,
+carriers (`snapshot3d.codecs.print_carriers`): the planes quantised and sent as bits with error correction and a CRC,
 on the same spread-spectrum carriers, the same host cancellation and the same 32 dB host (numpy; a bench
 candidate, not a shipped codec).
 
 Source coding (embedded, so that a capture that carries less still restores something): each plane
 channel's orthonormal DCT coefficient i is mapped to an 8-bit index over [-4 s_i, 4 s_i] (s_i from the
-carriers' prior spectrum `print_layout.prior_spectrum`); its bit-planes are sent most significant first,
+carriers' prior spectrum `print_source.prior_spectrum`); its bit-planes are sent most significant first,
 all coefficients' bit-planes in order of what each is worth (s_i^2 4^-p: reverse water-filling by
 bit-planes). Whatever prefix arrives restores every coefficient at the middle of the interval its known
 bits leave (0 where none arrived, the prior's mean).
@@ -27,7 +27,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from snapshot3d import print_layout as pl
+from snapshot3d.codecs import print_carriers, print_embed, print_read, print_source
 from snapshot3d.scanner.pixelmeta import conv_encode, viterbi
 
 __all__ = ["DigitalDesign", "DESIGN", "embed_digital", "read_digital", "DigitalReading", "source_order",
@@ -42,7 +42,7 @@ _SEED = 20261124
 
 @dataclass(frozen=True)
 class DigitalDesign:
-    """carriers: data carriers (the pilots, `print_layout.PILOTS`, come on top); layers: (share of the data
+    """carriers: data carriers (the pilots, `print_carriers.PILOTS`, come on top); layers: (share of the data
     carriers, repetitions per coded bit) of each nested layer, most protected first."""
 
     carriers: int = 12000
@@ -63,16 +63,16 @@ def layer_sizes(design: DigitalDesign) -> list[tuple[int, int, int]]:
 
 
 @lru_cache(maxsize=8)
-def _carriers(count: int) -> pl.PrintLayout:
+def _carriers(count: int) -> print_carriers.PrintLayout:
     """Pilots + `count` data carriers (the print codec's pool; values are all +-1)."""
     rng = np.random.default_rng(_SEED + count)
-    chips, base = pl.carrier_chips(pl.PILOTS + count, rng)
-    return pl.PrintLayout(0, 0, chips, base, np.zeros(0, int), np.zeros(0), np.zeros(0), 1.0,
-                          rng.choice([-1.0, 1.0], size=pl.PILOTS))
+    chips, base = print_carriers.carrier_chips(print_carriers.PILOTS + count, rng)
+    return print_carriers.PrintLayout(0, 0, chips, base, np.zeros(0, int), np.zeros(0), np.zeros(0), 1.0,
+                          rng.choice([-1.0, 1.0], size=print_carriers.PILOTS))
 
 
 def _sigmas(res: int, channels: int) -> np.ndarray:
-    return np.sqrt(np.tile(pl.prior_spectrum(res).ravel(), 3 * channels))
+    return np.sqrt(np.tile(print_source.prior_spectrum(res).ravel(), 3 * channels))
 
 
 def source_order(res: int, channels: int) -> tuple[np.ndarray, np.ndarray]:
@@ -90,7 +90,7 @@ def encode_source(planes: np.ndarray) -> np.ndarray:
     _, c, r, _ = planes.shape
     sig = _sigmas(r, c)
     levels = 1 << INDEX_BITS
-    idx = np.clip(np.floor((pl.plane_dct(planes) + RANGE_SIGMAS * sig) / (2 * RANGE_SIGMAS * sig) * levels), 0, levels - 1)
+    idx = np.clip(np.floor((print_source.plane_dct(planes) + RANGE_SIGMAS * sig) / (2 * RANGE_SIGMAS * sig) * levels), 0, levels - 1)
     coef, plane = source_order(r, c)
     return ((idx.astype(np.int64)[coef] >> (INDEX_BITS - 1 - plane)) & 1).astype(np.uint8)
 
@@ -108,7 +108,7 @@ def decode_source(bits: np.ndarray, res: int, channels: int) -> np.ndarray:
     top = idx >> (INDEX_BITS - known)                            # the known bits as an integer
     lo = -RANGE_SIGMAS + top * width
     value = sig * _gauss_mean(np.where(top == 0, -np.inf, lo), np.where(top == (1 << known) - 1, np.inf, lo + width))
-    return pl.plane_idct(value, (3, channels, res, res)).astype(np.float32)
+    return print_source.plane_idct(value, (3, channels, res, res)).astype(np.float32)
 
 
 def _gauss_mean(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -143,13 +143,13 @@ def _channel_bits(stream: np.ndarray, design: DigitalDesign) -> np.ndarray:
 
 
 def embed_digital(host: np.ndarray, planes: np.ndarray, design: DigitalDesign = DESIGN,
-                  host_psnr: float = pl.HOST_PSNR) -> np.ndarray:
+                  host_psnr: float = print_source.HOST_PSNR) -> np.ndarray:
     """host (380, 380, 3) float RGB in [0, 1], planes (3, C, R, R) -> snapshot (380, 380, 3) uint8 RGB at
     `host_psnr` dB from the host."""
     lay = _carriers(design.carriers)
     coded = _channel_bits(encode_source(planes), design)
     unit = np.concatenate([lay.pilot_signs, 1.0 - 2.0 * coded])
-    return pl.embed_values(host, lay, unit, host_psnr)[0]
+    return print_embed.embed_values(host, lay, unit, host_psnr)[0]
 
 
 @dataclass(frozen=True)
@@ -170,11 +170,11 @@ def read_digital(capture: np.ndarray, res: int, channels: int, design: DigitalDe
     """A rectified capture (380, 380, 3) uint8 RGB -> planes (3, C, R, R) float32 and what was read.
     `sent`: the data carriers' coded bits, to measure the mutual information (bench only)."""
     lay = _carriers(design.carriers)
-    read, factor = pl.read_carriers(capture, lay)
-    p = read[:pl.PILOTS] * lay.pilot_signs
+    read, factor = print_read.read_carriers(capture, lay)
+    p = read[:print_carriers.PILOTS] * lay.pilot_signs
     gain = max(float(np.mean(p)), 1e-9)
-    unit = max(float(np.mean((p - gain) ** 2 / factor[:pl.PILOTS])), 1e-12)
-    llr = 2.0 * gain * read[pl.PILOTS:] / (unit * factor[pl.PILOTS:])    # log P(0) / P(1)
+    unit = max(float(np.mean((p - gain) ** 2 / factor[:print_carriers.PILOTS])), 1e-12)
+    llr = 2.0 * gain * read[print_carriers.PILOTS:] / (unit * factor[print_carriers.PILOTS:])    # log P(0) / P(1)
     bits, layers, start = [], 0, 0
     for n, rep, info in layer_sizes(design):
         coded_len = 2 * (info + _CRC_BITS + _TAIL)
@@ -191,7 +191,7 @@ def read_digital(capture: np.ndarray, res: int, channels: int, design: DigitalDe
     if sent is not None:
         s = 1.0 - 2.0 * sent
         mi = float(np.sum(1.0 - np.logaddexp(0.0, -np.clip(llr * s, -60, 60)) / np.log(2.0)))
-    snr = gain ** 2 / (unit * float(np.mean(factor[pl.PILOTS:])))
+    snr = gain ** 2 / (unit * float(np.mean(factor[print_carriers.PILOTS:])))
     return decode_source(stream, res, channels), DigitalReading(layers, len(stream), float(10 * np.log10(snr)), mi)
 
 

@@ -22,7 +22,7 @@ from snapshot3d.train.field.decoder import load_decoder
 from snapshot3d.train.field.evaluate import evaluate_planes
 from snapshot3d.train.field.fit import fit, hull_grid
 
-from .common import pyplot
+from .common import pyplot, run_metadata
 
 __all__ = ["bench_fit_command", "BENCH_SCENES"]
 
@@ -118,7 +118,7 @@ def merge_results(out: Path) -> list[dict]:
     with open(out / "fit.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader(), w.writerows(rows)
-    meta = {**parts[0], "rows": rows, "command": [p["command"] for p in parts]}
+    meta = {**parts[0], "rows": rows, "command": [p["command"] for p in parts], "meta": run_metadata()}
     (out / "fit.json").write_text(json.dumps(meta, indent=2))
     _chart(rows, out / "fit.png", parts[0]["cpu_count"], parts[0]["torch_threads"])
     return rows
@@ -141,7 +141,8 @@ def bench_fit_command(args) -> int:
         with open(out / f"fit{suffix}.csv", "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))
             w.writeheader(), w.writerows(rows)
-        meta = {"cpu_count": cores, "torch_threads": torch.get_num_threads(), "quick": args.quick,
+        meta = {"cpu_count": cores, "meta": run_metadata(), "torch_threads": torch.get_num_threads(),
+                "quick": args.quick,
                 "command": f"snapshot3d bench fit --scenes {args.scenes}" + (" --quick" if args.quick else ""),
                 "configs": {k: asdict(v[2]) for k, v in BENCH_SCENES.items()},
                 "step_sweeps": {k: v[3] for k, v in BENCH_SCENES.items()}, "rows": rows}

@@ -4,7 +4,7 @@ print codec's candidate band sets through the real channel (sheet -> `simulate` 
 - `response` rows: carriers over all 27 detail bands (luma, red-green, yellow-blue x Haar levels 1-3 x
   LH, HL, HH; equal energy per coefficient) hold a scene's planes in each host at the print codec's host
   fidelity; per capture and band, the gain of the carriers' partial readings against the digital
-  snapshot's and the noise left, relative to the print noise model (`print_layout.band_response`);
+  snapshot's and the noise left, relative to the print noise model (`print_read.band_response`);
   `eta` = gain^2 / noise, what a unit of payload energy in that band is worth to the combining receiver.
 - `pool` rows: each candidate band set (`CANDIDATES`: the codec's own and others) embedded, captured with
   the same seeds and read by the combining receiver: `restore_psnr` (orbit views against the scene's own),
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from snapshot3d import bands, formats
-from snapshot3d import print_layout as pl
+from snapshot3d import formats
+from snapshot3d.codecs import bands, print_carriers, print_embed, print_read
 from snapshot3d.errors import UserError
 from snapshot3d.metrics import ssim
 from snapshot3d.scanner.backgrounds import load_host
@@ -31,7 +31,7 @@ from .common import SEVERITIES, ViewJudge, bench_progress, capture_seeds, psnr, 
 __all__ = ["bench_print_bands_command", "CANDIDATES"]
 
 CANDIDATES = {
-    "print-1": pl.PRINT_BANDS,
+    "print-1": print_carriers.PRINT_BANDS,
     "chroma-4px": {"RG2LH": 1.0, "RG2HL": 1.0, "YB2LH": 1.0, "YB2HL": 1.0, "Y2HH": 1.0, "RG2HH": 0.5},
     "chroma-8px": {"RG2LH": 1.0, "RG2HL": 1.0, "RG3LH": 4.0, "RG3HL": 4.0, "RG3HH": 4.0, "YB2LH": 1.0,
                    "YB2HL": 1.0, "Y2HH": 1.0},
@@ -58,7 +58,7 @@ def bench_print_bands_command(args) -> int:
     hosts = _hosts(args.hosts, args.heldout)
     scenes = {Path(s).stem: load_scene_file(s) for s in args.scenes.split(",")}
     first = next(iter(scenes.values()))
-    every = pl.make_layout(first.resolution, first.channels, {b: 1.0 for b in bands.DETAIL_BANDS})
+    every = print_carriers.make_layout(first.resolution, first.channels, {b: 1.0 for b in bands.DETAIL_BANDS})
     per_host = sum(len(capture_seeds(s, args.seeds)) for s in sevs)
     judges = {name: ViewJudge(scene, args.size) for name, scene in scenes.items()}   # reference views, once
     rows = []
@@ -66,22 +66,22 @@ def bench_print_bands_command(args) -> int:
         for hname, host in hosts.items():
             host8 = np.round(host * 255) / 255
             meta = scene_meta(first, formats.PRINT_CODEC)
-            snap, _ = pl.embed_values(host, every, pl.carrier_values(every, first.planes()))
+            snap, _ = print_embed.embed_values(host, every, print_embed.carrier_values(every, first.planes()))
             for sev in sevs:
                 for seed in capture_seeds(sev, args.seeds):
                     rect = capture(snap, meta, sev, seed)
                     bar.update(1)
                     if rect is None:
                         continue
-                    gain, noise = pl.band_response(rect, snap, every)
+                    gain, noise = print_read.band_response(rect, snap, every)
                     rows += [{"kind": "response", "host": hname, "severity": sev, "seed": seed, "band": b,
                               "gain": float(g), "noise": float(n), "eta": float(g * g / max(n, 1e-30))}
                              for b, g, n in zip(every.bands, gain, noise)]
             for sname, scene in scenes.items():
                 judge, meta = judges[sname], scene_meta(scene, formats.PRINT_CODEC)
                 for name, pool in pools.items():
-                    lay = pl.make_layout(scene.resolution, scene.channels, pool)
-                    snap, _ = pl.embed_values(host, lay, pl.carrier_values(lay, scene.planes()))
+                    lay = print_carriers.make_layout(scene.resolution, scene.channels, pool)
+                    snap, _ = print_embed.embed_values(host, lay, print_embed.carrier_values(lay, scene.planes()))
                     base = {"kind": "pool", "pool": name, "scene": sname, "host": hname,
                             "host_psnr": psnr(snap / 255, host8), "host_ssim": ssim(snap / 255, host8)}
                     for sev in sevs:
@@ -90,7 +90,7 @@ def bench_print_bands_command(args) -> int:
                             bar.update(1)
                             row = dict(base, severity=sev, seed=seed, detected=int(rect is not None))
                             if rect is not None:
-                                planes = pl.restore_layout(lay, *pl.read_carriers(rect, lay))[0]
+                                planes = print_read.restore_layout(lay, *print_read.read_carriers(rect, lay))[0]
                                 row["restore_psnr"] = judge.planes_psnr(planes)
                             rows.append(row)
     summary = summarise(rows, sevs)

@@ -1,5 +1,5 @@
 """`snapshot3d bench print-digital`: the digital payload (`bench.digital_payload`: quantised planes, CRC,
-convolutional code, nested layers) against the shipped analog carriers (`print_layout`'s codec; `print-1`
+convolutional code, nested layers) against the shipped analog carriers (`codecs.print_carriers`' codec; `print-1`
 when its results were written) on the same scenes, hosts, severities and seeds, each through the real channel (sheet -> `simulate` -> `scan`).
 
 Rows (print_digital.csv), per scene, host, severity and seed:
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from snapshot3d import formats
+from snapshot3d.codecs.print_embed import embed
 from snapshot3d.errors import UserError
-from snapshot3d.print_layout import embed
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import load_scene_file
@@ -35,14 +35,12 @@ METHODS = ("print", "digital", "digital-ideal")
 
 
 def _ideal_psnr(judge: ViewJudge, curve, bits: float, planes: np.ndarray) -> float:
-    from snapshot3d.train.codec.capacity import best_plane_rmse
-
-    from .capacity import psnr_at
+    from .capacity_model import best_plane_rmse, psnr_at
     return psnr_at(curve, best_plane_rmse(bits, planes.size, float(np.var(planes))))
 
 
 def _scene_rows(sname, scene, hosts, severities, seeds, size, bar) -> list[dict]:
-    from .capacity import noise_curve
+    from .capacity_model import noise_curve
 
     judge = ViewJudge(scene, size)
     curve = noise_curve(judge)

@@ -1,4 +1,4 @@
-"""`snapshot3d bench print-predict`: the print channel's model (`snapshot3d.print_channel`) fitted on real
+"""`snapshot3d bench print-predict`: the print channel's model (`snapshot3d.codecs.print_channel`) fitted on real
 simulated captures, and its predictions of each scene's restore checked against measured restores.
 
 For each bench scene (spot at 16x4, 24x4, 32x4, 48x4 and lego at 48x4, `bench/models/`) and host, the
@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from snapshot3d import formats
-from snapshot3d.print_channel import ChannelModel, measure, predicted_planes
-from snapshot3d.print_layout import embed
+from snapshot3d.codecs.print_channel import ChannelModel, measure, predicted_planes
+from snapshot3d.codecs.print_embed import embed
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import load_scene_file

@@ -36,7 +36,7 @@ SIZE = 128
 
 def _rows(net, scene, sname: str, hname: str, host: np.ndarray, judge: ViewJudge,
           runs: list[tuple[str, int, str]]) -> list[dict]:
-    from snapshot3d.train.codec.commands import marked_host, strength_for
+    from snapshot3d.train.codec.embedding import marked_host, strength_for
     from snapshot3d.train.codec.hinet import embed_planes
     from snapshot3d.train.codec.refine import refine_snapshot
 
@@ -111,7 +111,8 @@ def _chart(summary: list[dict], path: Path, cores: int) -> None:
 
 def _setting(text: str) -> str:
     """'0.55' -> 'x0.55' (an embed strength); '38dB' -> '38 dB' (a host fidelity, `embed --host-psnr`)."""
-    from snapshot3d.train.codec.commands import HOST_PSNRS, STRENGTHS
+    from snapshot3d.train.codec.commands import HOST_PSNRS
+    from snapshot3d.train.codec.embedding import STRENGTHS
 
     t = text.strip()
     try:

@@ -27,7 +27,7 @@ from snapshot3d.scanner.scan import scan_image
 from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
 
-from .common import pyplot
+from .common import pyplot, run_metadata
 
 __all__ = ["bench_scan_command", "SWEEPS", "TARGETS"]
 
@@ -254,7 +254,8 @@ def bench_scan_command(args) -> int:
     report = {
         "command": f"snapshot3d bench scan --out {args.out} --seeds {args.seeds} --severe-seeds {args.severe_seeds} "
                    f"--negatives {args.negatives} --timing-runs {args.timing_runs}",
-        "cpu_count": os.cpu_count(), "machine": platform.platform(), "python": platform.python_version(),
+        "cpu_count": os.cpu_count(), "meta": run_metadata(),
+        "machine": platform.platform(), "python": platform.python_version(),
         "opencv": cv2.__version__, "wall_seconds": round(time.time() - t_start, 1), "targets": TARGETS,
         "mild_and_moderate": _summary([dict(r, group="mm") for r in mm], "mm"),
         "mild": _summary(rows, "mild"), "moderate": _summary(rows, "moderate"), "severe": _summary(rows, "severe"),

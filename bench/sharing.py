@@ -75,7 +75,7 @@ SHARING = {  # name -> (copy(rgb, rng), seeds)
 
 
 def _rows(scene, sname: str, hname: str, host: np.ndarray, judge, refine: int) -> list[dict]:
-    from snapshot3d.train.codec.commands import snapshot_for
+    from snapshot3d.train.codec.embedding import snapshot_for
 
     want = pixelmeta.unpack(pixelmeta.pack(scene_meta(scene, formats.FILE_CODEC, 1.0)))
     snap = snapshot_for("file", host, scene, 1.0, refine)
@@ -130,7 +130,7 @@ def side_by_side(scene, host: np.ndarray, refine: int, size: int, path: Path) ->
     """Rows: the snapshot (or its copy) and 4 orbit views: original planes, then restored from a PNG, a
     JPEG-75 copy and a 256-px JPEG-90 copy of the file, each read with no text (metadata from the pixels)."""
     from snapshot3d.images import write_png
-    from snapshot3d.train.codec.commands import snapshot_for
+    from snapshot3d.train.codec.embedding import snapshot_for
 
     judge, pick = ViewJudge(scene, size), [0, 5, 10, 15]
     snap = snapshot_for("file", host, scene, 1.0, refine)

@@ -31,19 +31,19 @@ __all__ = ["OPSET", "MODEL_KINDS", "DOCS", "export_restore", "export_restore_pri
 
 OPSET = 17
 MODEL_KINDS = ("restore", "restore-print", "project", "field")
-# Each graph's contract, written into the model as its doc string (README "The ONNX models" says the same).
+# Each graph's contract, written into the model as its doc string (docs/onnx-contract.md says it in full).
 DOCS = {
     "restore": "file medium (the codec named by the metadata's codec_id and the file name). Input snapshot: float32 (1, 3, 380, 380), RGB, NCHW, values in [0, 1] "
                "(uint8 / 255). Output secret: float32 (1, 24, 95, 95): plane k's channel c at index 8k + c (planes xy, "
                "xz, yz); divide by the strength in the metadata, then planes = P S P^T per channel with P = pinv(U), U "
-               "(95, R) the linear interpolation of R texel centres onto 95 cell centres (snapshot3d/codec_layout.py).",
+               "(95, R) the linear interpolation of R texel centres onto 95 cell centres (snapshot3d/codecs/file_layout.py).",
     "restore-print": "print medium (every print codec, every plane size: the layout of the metadata's codec_id and "
-                     "plane size comes in as inputs, snapshot3d/print_feeds.py). Input snapshot: float32 (1, 3, 380, "
+                     "plane size comes in as inputs, snapshot3d/codecs/print_feeds.py). Input snapshot: float32 (1, 3, 380, "
                      "380), RGB, NCHW, in [0, 1] (the scanner's rectified capture, uint8 / 255); chips int64 (N, K), base "
                      "float32 (N, K), place int64 (3*C*R*R,), scale and prior float32 (M,), pilots float32 (256,), folded "
-                     "int64 (F,), fold_amp float32 (F,), dct float32 (R, R), prior_rest float32 (). Outputs planes: float32 "
-                     "(3, C, R, R) (clip to [-1, 1], round to 8 bits); reading: float32 (3,): the pilots' gain, noise "
-                     "per carrier and the planes' expected RMS error.",
+                     "int64 (F,), fold_amp float32 (F,), dct float32 (R, R), prior_rest float32 () (rank 0). Outputs planes: "
+                     "float32 (3, C, R, R), not clipped (clip to [-1, 1], round to 8 bits to store them); reading: "
+                     "float32 (3,): the pilots' gain, noise per carrier and the planes' expected RMS error.",
     "project": "renderer, part 1. Inputs planes: float32 (3, 12, R, R) in [-1, 1] (planes xy, xz, yz; channels beyond "
                "the scene's zero); interp: float32 (B, R), the bilinear weights of B grid coordinates over R texels. "
                "Output tables: float32 (3, B*B, 32), the decoder's first layer (without bias) at every grid node.",
@@ -53,15 +53,16 @@ DOCS = {
 }
 
 
-def _metadata(codec: str) -> dict:
-    """The metadata of every graph; `codec`: the codec ids its restore graph reads (comma-separated)."""
-    return {"codec_id": codec, "decoder_version": formats.DECODER_VERSION,
+def _metadata(codec: str | None) -> dict:
+    """The metadata of every graph; `codec`: the codec ids a restore graph reads (comma-separated, e.g.
+    'print-2,print-1'), None for the renderer's graphs, which every codec shares (they name no codec)."""
+    return {**({"codec_id": codec} if codec else {}), "decoder_version": formats.DECODER_VERSION,
             "snapshot_size": str(formats.SNAPSHOT_SIZE), "orbit_views": str(formats.ORBIT_VIEWS),
             "orbit_size": str(formats.ORBIT_SIZE), "orbit_elevation_deg": str(formats.ORBIT_ELEVATION_DEG),
             "orbit_fov_deg": str(formats.ORBIT_FOV_DEG), "c_max": str(formats.C_MAX), "opset": str(OPSET)}
 
 
-def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str, out_shapes: dict | None = None) -> int:
+def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str | None, out_shapes: dict | None = None) -> int:
     """Metadata, doc string and declared output shapes (`out_shapes`: name -> dims, int or symbolic name,
     where the exporter left a dimension it could not name), checked, written atomically."""
     import onnx
@@ -85,7 +86,7 @@ def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str, out_sh
     return len(data)
 
 
-def _export(module, args, names_in, names_out, dynamic, path: Path, kind: str, codec: str = formats.FILE_CODEC,
+def _export(module, args, names_in, names_out, dynamic, path: Path, kind: str, codec: str | None = None,
             out_shapes: dict | None = None) -> int:
     buf = io.BytesIO()
     with torch.no_grad():
@@ -105,7 +106,7 @@ def export_restore(codec, path: Path, codec_id: str = formats.FILE_CODEC) -> int
 def export_restore_print(path: Path) -> int:
     """The print medium's restore graph (`export.print_graph`), traced on the current codec's 16x4 layout; every
     layout dimension is dynamic, so it reads any plane size and both print codecs."""
-    from snapshot3d import print_feeds
+    from snapshot3d.codecs import print_feeds
 
     from .print_graph import PrintRestoreGraph
 

@@ -61,8 +61,8 @@ def field_parity(project_path, field_path, size: int = 96) -> dict:
 def restore_parity(restore_path, project_path, field_path, size: int = 96, codec: str = formats.FILE_CODEC) -> dict:
     """restore_psnr of spot hidden in a bundled host by file codec `codec`, restored by its torch network and by
     the ORT graph at `restore_path` (same renderer)."""
-    from snapshot3d import codec_layout
     from snapshot3d.cameras import orbit_cameras
+    from snapshot3d.codecs import file_layout
     from snapshot3d.images import snapshot_nchw
     from snapshot3d.metrics import psnr
     from snapshot3d.scanner.backgrounds import load_host
@@ -81,7 +81,7 @@ def restore_parity(restore_path, project_path, field_path, size: int = 96, codec
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, size, size)
 
     def score(secret):
-        planes = codec_layout.secret_to_planes(secret, scene.resolution, scene.channels)
+        planes = file_layout.secret_to_planes(secret, scene.resolution, scene.channels)
         return psnr(render_views(models, dequantize_planes(quantize_planes(planes)), scene.box, c2w, intr, size, size), ref)
     a, b = score(sec_torch), score(sec_ort)
     return {"secret_max_abs_diff": float(np.abs(sec_torch - sec_ort).max()), "restore_psnr_torch": a,
@@ -90,11 +90,11 @@ def restore_parity(restore_path, project_path, field_path, size: int = 96, codec
 
 def print_parity(graph_path, project_path, field_path, size: int = 96, severity: str = "moderate") -> dict:
     """The print medium's restore graph at `graph_path` (onnxruntime) against the numpy receiver it was written
-    from (`print_layout.despread` + `restore`): the shipped print scene hidden in a bundled host, read from the
+    from (`print_read.despread` + `restore`): the shipped print scene hidden in a bundled host, read from the
     lossless snapshot and from the scan of a simulated `severity` photo of its sheet, both codecs' layouts;
     the planes' largest difference, the share of 8-bit codes that differ, and restore_psnr each way."""
-    from snapshot3d import print_feeds, print_layout
     from snapshot3d.cameras import orbit_cameras
+    from snapshot3d.codecs import print_embed, print_feeds, print_read
     from snapshot3d.metrics import psnr
     from snapshot3d.paths import asset
     from snapshot3d.scanner.backgrounds import load_host
@@ -112,10 +112,10 @@ def print_parity(graph_path, project_path, field_path, size: int = 96, severity:
     graph = session(str(graph_path))
     out = {}
     for codec in formats.PRINT_CODECS:
-        snap = print_layout.embed(load_host("builtin:coffee"), scene.planes(), codec=codec)
+        snap = print_embed.embed(load_host("builtin:coffee"), scene.planes(), codec=codec)
         photo = capture(snap, scene_meta(scene, codec), severity, 0, sheet_dots=4)
         for name, img in (("lossless", snap), (severity, photo)):
-            want, reading = print_layout.restore(*print_layout.despread(img, r, c, codec=codec), r, c, codec=codec)
+            want, reading = print_read.restore(*print_read.despread(img, r, c, codec=codec), r, c, codec=codec)
             got, got_reading = graph.run(None, print_feeds.graph_feeds(img, r, c, codec))
             codes = [quantize_planes(x) for x in (want, got)]
             a, b = (psnr(render_views(models, dequantize_planes(q), scene.box, c2w, intr, size, size), ref) for q in codes)

@@ -1,6 +1,6 @@
 """The print medium's restore graph in torch, for export to ONNX (`restore-print.onnx`): the designed
-receiver of `snapshot3d.print_layout` (`read_carriers` with the bands combined, then `restore_layout`)
-step for step, in float32, with the layout as inputs (`snapshot3d.print_feeds`), so that one graph reads
+receiver of `snapshot3d.codecs.print_read` (`read_carriers` with the bands combined, then `restore_layout`)
+step for step, in float32, with the layout as inputs (`snapshot3d.codecs.print_feeds`), so that one graph reads
 every plane size and both print codecs. The numpy code stays the reference; `export.parity.print_parity`
 holds the graph to it on real captures.
 
@@ -14,11 +14,12 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from snapshot3d import formats, print_fold, print_layout
+from snapshot3d import formats
+from snapshot3d.codecs import print_carriers, print_fold
 
 __all__ = ["PrintRestoreGraph"]
 
-_BANDS = tuple(print_layout.PRINT_BANDS)   # the pool's order: Y2LH, Y2HL, Y2HH, Y1LH, Y1HL, RG2LH, RG2HL
+_BANDS = tuple(print_carriers.PRINT_BANDS)   # the pool's order: Y2LH, Y2HL, Y2HH, Y1LH, Y1HL, RG2LH, RG2HL
 
 
 def _haar(x: Tensor):
@@ -27,7 +28,7 @@ def _haar(x: Tensor):
 
 
 def _pool(img: Tensor) -> Tensor:
-    """img (3, H, W) RGB -> the flat pool of the codec's bands (`bands.analyse`, `print_layout._flat`)."""
+    """img (3, H, W) RGB -> the flat pool of the codec's bands (`bands.analyse`, `print_carriers.flat`)."""
     y = img.sum(0) / math.sqrt(3.0)
     rg = (img[0] - img[1]) / math.sqrt(2.0)
     yll, ylh1, yhl1, _ = _haar(y)
@@ -38,7 +39,7 @@ def _pool(img: Tensor) -> Tensor:
 
 
 def _noise_pool(img: Tensor) -> Tensor:
-    """img (3, H, W) -> `print_layout.noise_map`: the print's noise power at every coefficient of the pool."""
+    """img (3, H, W) -> `print_carriers.noise_map`: the print's noise power at every coefficient of the pool."""
     sigma, half = 2.0, 8    # cv2.GaussianBlur(sigma=2) on float32: 17 taps, border reflect-101
     t = torch.arange(-half, half + 1, dtype=torch.float32)
     k = torch.exp(-t * t / (2 * sigma * sigma))
@@ -50,7 +51,7 @@ def _noise_pool(img: Tensor) -> Tensor:
     for lvl, m in maps.items():
         s = m.clamp(0.0, 1.0)
         dlin = torch.where(s <= 0.04045, torch.full_like(s, 1 / 12.92), 2.4 / 1.055 * ((s + 0.055) / 1.055) ** 1.4)
-        noise[lvl] = print_layout.PRINT_NOISE * torch.clamp(1.0 / (dlin * dlin), max=100.0)
+        noise[lvl] = print_carriers.PRINT_NOISE * torch.clamp(1.0 / (dlin * dlin), max=100.0)
     return torch.cat([noise[int(b[-3])].reshape(-1) for b in _BANDS])
 
 
@@ -101,12 +102,12 @@ class PrintRestoreGraph(nn.Module):
         self.edges = _band_edges()
 
     def _filters(self, vals: Tensor, noise: Tensor, base: Tensor, chips: Tensor, pilots: Tensor) -> Tensor:
-        """`print_layout._filters`, then `band_weights`: the filters (N, K) that read each carrier."""
+        """`print_carriers.filters`, then `band_weights`: the filters (N, K) that read each carrier."""
         w = base / torch.sqrt(noise)
         w = w / torch.sqrt((w * w).sum(1, keepdim=True))
         q = w / noise
         q = q / (q * w).sum(1, keepdim=True)
-        p = print_layout.PILOTS
+        p = print_carriers.PILOTS
         band = sum((chips >= e).to(torch.int64) for e in self.edges)                     # (N, K)
         onehot = (band[..., None] == torch.arange(len(_BANDS))).to(torch.float32)        # (N, K, nb)
         signs = pilots / pilots.abs().mean()
@@ -133,7 +134,7 @@ class PrintRestoreGraph(nn.Module):
         f = self._filters(vals, noise, base, chips, pilots)
         read, factor = (vals * f).sum(1), (f * f * noise).sum(1)
         # restore_layout (strength 1)
-        p, m, nf = print_layout.PILOTS, scale.shape[0], folded.shape[0]
+        p, m, nf = print_carriers.PILOTS, scale.shape[0], folded.shape[0]
         amp = pilots.abs().mean()
         pil = read[:p] * pilots / amp
         gain = torch.clamp(pil.mean() / amp, min=1e-3)

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import json
+import math
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -9,6 +11,7 @@ import cv2
 import numpy as np
 
 from snapshot3d.errors import UserError
+from snapshot3d.validate import integer
 
 from .imageio_safe import read_image_bgr, write_atomic, write_image
 
@@ -23,9 +26,14 @@ def _printed_width_mm(png: Path, width_px: int) -> float | None:
     """The width the sheet prints at, from the dpi `sheet` writes into its PNG (None when it has none)."""
     from PIL import Image
 
-    with Image.open(png) as im:
-        dpi = im.info.get("dpi")
-    return width_px / float(dpi[0]) * 25.4 if dpi and float(dpi[0]) > 1 else None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(png) as im:
+                dpi = float(im.info.get("dpi")[0])
+    except (OSError, ValueError, TypeError, IndexError, SyntaxError):
+        return None   # no dpi, or one that is not a number
+    return width_px / dpi * 25.4 if math.isfinite(dpi) and 1 < dpi < 1e5 else None
 
 
 def _sheet_png(path: Path) -> Path:
@@ -49,6 +57,7 @@ def simulate_command(args) -> int:
         raise UserError(f"cannot write {out.name}: use a .jpg or .png file name")
     if args.severity == "none" and ext != ".png":
         raise UserError("severity 'none' is lossless: write the photo as .png")
+    integer(args.seed, "--seed", 0, 2 ** 32 - 1)
     png = _sheet_png(Path(args.sheet))
     sheet = cv2.cvtColor(read_image_bgr(png, "sheet"), cv2.COLOR_BGR2RGB)
     preset, width_mm = get_preset(args.severity), _printed_width_mm(png, sheet.shape[1])
@@ -92,6 +101,8 @@ def scan_command(args) -> int:
     out = Path(args.output)
     if out.suffix.lower() != ".png":
         raise UserError(f"cannot write {out.name}: the rectified snapshot is written losslessly as .png")
+    if args.debug and Path(args.debug).suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise UserError(f"cannot write {Path(args.debug).name}: the overlay is written as .png or .jpg")
     import time
 
     t0 = time.perf_counter()

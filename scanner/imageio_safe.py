@@ -2,25 +2,31 @@
 
 `read_image_bgr` checks, before decoding, that the file exists, is an image (by its header, via
 Pillow's lazy open), is within MAX_PIXELS (a decompression bomb is refused before any pixel buffer
-is allocated) and, for JPEG and PNG, is complete (no truncation); then OpenCV decodes it. Every
-failure is a one-line `UserError` naming the cause."""
+is allocated; `snapshot3d.validate` holds the limits), is one of the formats read here and, for JPEG and PNG,
+is complete (no truncation); then OpenCV decodes it, its log at errors only and what its C decoders write to
+stderr sent to the `snapshot3d.imageio` log (`quiet_stderr`). Every failure is a one-line `UserError` naming
+the cause."""
 from __future__ import annotations
 
+import logging
 import os
 import re
+import struct
 import tempfile
 import warnings
+from functools import lru_cache
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from snapshot3d.errors import UserError
+from snapshot3d.images import quiet_stderr
+from snapshot3d.validate import MAX_BYTES, MAX_PIXELS, check_image_size
 
-__all__ = ["MAX_PIXELS", "MAX_BYTES", "read_image_bgr", "image_size", "write_atomic", "write_image"]
+__all__ = ["MAX_PIXELS", "MAX_BYTES", "read_image_bgr", "image_size", "quiet_stderr", "write_atomic", "write_image"]
 
-MAX_PIXELS = 120_000_000   # larger than any phone's full-resolution photo (108 MP); 20000x20000 is refused
-MAX_BYTES = 300_000_000    # file size limit
+_FORMATS = ("JPEG", "MPO", "PNG", "WEBP", "BMP", "TIFF")   # what OpenCV decodes here (MPO: a phone's JPEG)
 _MAGIC = ((b"\xff\xd8", "JPEG"), (b"\x89PNG", "PNG"), (b"GIF8", "GIF"), (b"BM", "BMP"), (b"RIFF", "WebP"),
           (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"))
 _JPEG_MARKER = re.compile(rb"\xff[^\x00\xd0-\xd7\xff]")
@@ -32,6 +38,7 @@ def image_size(path, what: str = "photo") -> tuple[int, int, str]:
     from PIL import Image
 
     path = Path(path)
+    _quiet_libraries()
     if path.is_dir():
         raise UserError(f"{path} is a folder; give the {what} file itself")
     if not path.is_file():
@@ -53,13 +60,12 @@ def image_size(path, what: str = "photo") -> tuple[int, int, str]:
             if head.startswith(magic):
                 raise UserError(f"{path.name} is a corrupt {kind} file (unreadable header)") from None
         raise UserError(f"{path.name} is not an image file (unrecognised content)") from None
-    except (OSError, SyntaxError, ValueError) as e:
-        raise UserError(f"{path.name} is a corrupt image file ({str(e).splitlines()[0][:80]})") from None
+    except (OSError, SyntaxError, ValueError, EOFError, struct.error) as e:
+        first = (str(e).splitlines() or [type(e).__name__])[0][:80]
+        raise UserError(f"{path.name} is a corrupt image file ({first})") from None
     finally:
         Image.MAX_IMAGE_PIXELS = old
-    if w * h > MAX_PIXELS:
-        raise UserError(f"{path.name} claims {w}x{h} pixels ({w * h / 1e6:.0f} MP), over the {MAX_PIXELS / 1e6:.0f} MP "
-                        f"limit: refused as a possible decompression bomb")
+    check_image_size(w, h, path.name)
     return w, h, fmt
 
 
@@ -94,22 +100,43 @@ def read_image_bgr(path, what: str = "photo") -> np.ndarray:
     names the file in error messages."""
     path = Path(path)
     w, h, fmt = image_size(path, what)
+    if fmt not in _FORMATS:
+        raise UserError(f"{path.name} is a {fmt} image; give a JPEG or PNG file")
     data = path.read_bytes()
-    if fmt == "JPEG" and not _jpeg_complete(data):
+    if fmt in ("JPEG", "MPO") and not _jpeg_complete(data):
         raise UserError(f"{path.name} is a corrupt or truncated JPEG file")
     if fmt == "PNG" and b"IEND" not in data[-64:]:
         raise UserError(f"{path.name} is a corrupt or truncated PNG file")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    try:
+        with quiet_stderr():
+            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error as e:
+        raise UserError(f"{path.name} is a corrupt image file (OpenCV: {str(e).strip().splitlines()[-1][:80]})") from None
     if img is None or img.size == 0:
         raise UserError(f"{path.name} is a corrupt image file (cannot decode its {fmt} data)")
+    if sorted(img.shape[:2]) != sorted((w, h)):   # the header's size was checked; the decoder must agree
+        raise UserError(f"{path.name} decodes to {img.shape[1]}x{img.shape[0]}, not the {w}x{h} its header declares")
     return img
 
 
+@lru_cache(maxsize=1)
+def _quiet_libraries() -> None:
+    """OpenCV's own log at errors only, Pillow's `logging` messages off (on a damaged file they would
+    print beside the one-line error)."""
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    logging.getLogger("PIL").setLevel(logging.CRITICAL)   # it logs a damaged TIFF at ERROR, then raises
+
+
 def write_atomic(path, data: bytes) -> None:
-    """Write bytes to `path` via a temporary file in the same folder and a rename (no partial file)."""
+    """Write bytes to `path` via a temporary file in the same folder and a rename (no partial file); its folder
+    is made when missing. UserError when the path cannot be written (a folder, a file as its folder, no
+    permission)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
+    except OSError as e:
+        raise UserError(f"cannot write {path} ({e.strerror or type(e).__name__})") from None
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -117,6 +144,9 @@ def write_atomic(path, data: bytes) -> None:
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp, path)
+    except OSError as e:
+        Path(tmp).unlink(missing_ok=True)
+        raise UserError(f"cannot write {path} ({e.strerror or type(e).__name__})") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

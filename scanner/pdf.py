@@ -1,7 +1,15 @@
 """A one-page PDF holding one RGB image, losslessly (Flate), at an exact physical size.
 
 Pillow's PDF writer stores RGB images as JPEG, which would blur the snapshot before it is even printed;
-this writer keeps every pixel (and asks viewers and printers not to smooth it: /Interpolate false)."""
+this writer keeps every pixel (and asks viewers and printers not to smooth it: /Interpolate false).
+
+Kept rather than `img2pdf` (which also embeds a PNG losslessly at an exact page size, and gives the same
+pixels): img2pdf 0.6.3 requires pikepdf (qpdf, 11.5 MB installed) and lxml (12 MB), 24 MB of new compiled
+dependencies for this 50-line writer; it writes no /Interpolate false; and on a 150 mm sheet at 300 dpi
+(1728 x 1254 px) it took 175 ms to encode the PNG + 25 ms, 1.02 MB, against 44 ms, 0.90 MB here (import
+80-120 ms). Measured 2026-11-25 on 2 cores (AMD EPYC): `pip install --target /tmp/i2p img2pdf; du -sh /tmp/i2p/*`,
+then `img2pdf.convert(png, layout_fun=img2pdf.get_layout_fun((img2pdf.mm_to_pt(150), None)))` timed against
+`pdf_bytes(rgb, 150.0)`, pixels read back with pikepdf's PdfImage."""
 from __future__ import annotations
 
 import zlib

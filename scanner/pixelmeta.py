@@ -11,7 +11,7 @@ bytes (the codec as an index into `formats.MARK_CODECS`, the numbers as float16,
 text's four significant digits), 10 repetitions at step 32. `LEGACY_FRAMES` are still read: version 1, 72
 bytes (the codec id as text, float32), 5 repetitions, at step 40 and at step 24. The shorter frame buys
 twice the repetitions, so the same copies read at a smaller step: the mark costs 42.4 dB of host PSNR
-instead of 40.7 (README "Metadata in the pixels"). A meta that the short frame cannot hold (a codec id
+instead of 40.7 (docs/file-codec.md "The metadata mark"). A meta that the short frame cannot hold (a codec id
 not in the table, a number beyond float16) is written in a version-1 frame at step 40. The reader sums
 soft decisions over the repetitions, decodes them with the Viterbi algorithm and accepts the frame only
 when its CRC holds, so a damaged mark is refused, never misread. The writer marks the host before the
@@ -130,6 +130,8 @@ def unpack(frame: bytes) -> SheetMeta | None:
     version = body[1]
     if body[0] == 1:
         n = body[2]
+        if 4 + n > len(body):   # a codec id longer than the frame: not a frame this build wrote
+            return None
         codec_bytes, flags, pos = body[3:3 + n], body[3 + n], 4 + n
         try:
             codec = codec_bytes.decode("ascii")
@@ -141,6 +143,8 @@ def unpack(frame: bytes) -> SheetMeta | None:
     values = []
     for i, fmt in enumerate(_FORMATS[body[0]]):
         if flags >> i & 1:
+            if pos + struct.calcsize(fmt) > len(body):
+                return None
             values.append(tuple(round(float(v), 6) for v in struct.unpack_from(fmt, body, pos)))
             pos += struct.calcsize(fmt)
         else:
@@ -190,7 +194,15 @@ def conv_encode(bits: np.ndarray) -> np.ndarray:
 
 
 def viterbi(soft: np.ndarray) -> np.ndarray:
-    """The most likely input bits for (2 * T,) soft values (> 0: a coded 0), the tail of six zeros dropped."""
+    """The most likely input bits for (2 * T,) soft values (> 0: a coded 0), the tail of six zeros dropped.
+
+    Kept rather than `komm` (pure Python, 2.7 MB; `ViterbiDecoder(TerminatedConvolutionalCode(ConvolutionalCode(
+    [[0o155, 0o117]]), T - 6), input_type="soft")`, the generators bit-reversed to its order, decodes the same
+    bits: 400 of 400 noisy frames identical, errors included): komm takes 6.2 ms per 38-byte frame and 11.1 ms
+    per 72-byte frame against 3.3 and 6.1 ms here, adds 73-119 ms of import to the decode path, and the encoder
+    (`conv_encode`, `_trellis`) that `mark` needs stays either way; this is 20 lines. scikit-commpy 0.8 imports
+    in 0.92 s (matplotlib, sympy). Measured 2026-11-25 on 2 cores (AMD EPYC): `pip install --target /tmp/komm
+    komm`, then both decoders timed on 200 random frames per frame size with Gaussian noise added."""
     _, out, prev = _trellis()
     sign = 1 - 2 * out                                     # (64, 2, 2): +1 where the coded bit is 0
     metric = np.full(len(prev), -np.inf)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from snapshot3d import formats
+
 __all__ = ["Preset", "PRESETS", "SEVERITIES", "get_preset", "PRINTER_DPI", "print_dots"]
 
 PRINTER_DPI = 600
@@ -104,7 +106,8 @@ PRESETS = {
                      motion_px=(0.0, 8.0), noise_shot=(0.002, 0.006), noise_read=(0.004, 0.01),
                      white_balance=0.15, jpeg_quality=(65, 82)),
 }
-SEVERITIES = tuple(PRESETS)
+SEVERITIES = formats.SEVERITIES
+"""the severity names, mildest first (one preset each in `PRESETS`)"""
 
 
 def get_preset(name) -> Preset:

@@ -5,15 +5,18 @@ Payload (`formats` QR_*): "S3D<version>|<codec id>[|b=x0,y0,z0,x1,y1,z1][|o=radi
 The same text travels in a snapshot file's metadata (PNG text chunk or JPEG comment)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from snapshot3d import formats
+from snapshot3d import formats, validate
+from snapshot3d.codecs.media import CODEC_MEDIUM, MEDIA
 from snapshot3d.errors import UserError
 
-__all__ = ["SheetMeta", "encode_payload", "decode_payload", "qr_matrix", "read_qr", "check_codec", "scene_meta"]
+__all__ = ["SheetMeta", "encode_payload", "decode_payload", "qr_matrix", "read_qr", "check_codec", "check_meta",
+           "scene_meta", "MAX_PAYLOAD"]
 
 
 @dataclass(frozen=True)
@@ -22,8 +25,8 @@ class SheetMeta:
 
     version: int = formats.SHEET_FORMAT_VERSION
     """sheet format version"""
-    codec: str = formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM]
-    """id of the codec that made the snapshot (`formats.CODEC_MEDIUM` names its medium)"""
+    codec: str = MEDIA[formats.DEFAULT_MEDIUM].codec
+    """id of the codec that made the snapshot (`codecs.media.CODEC_MEDIUM` names its medium)"""
     box: tuple | None = None
     """scene box (x0, y0, z0, x1, y1, z1) in world units, or None"""
     orbit: tuple | None = None
@@ -64,25 +67,69 @@ def encode_payload(meta: SheetMeta) -> str:
     return text
 
 
+MAX_PAYLOAD = 512
+"""characters of a metadata text (a QR code of the sheet holds about 100; longer text is refused unread)"""
+_LENGTHS = {"b": 6, "o": 3, "t": 3, "p": 2, "s": 1}
+
+
 def decode_payload(text: str) -> SheetMeta:
-    """Parse a payload; raises ValueError when it is not a snapshot3d sheet's."""
+    """Parse a payload; raises ValueError when it is not a snapshot3d sheet's, or a field is malformed (a
+    known field with the wrong count of numbers, or a number that is not finite). Unknown fields are
+    ignored. The numbers' ranges are checked by `check_meta`."""
+    if not isinstance(text, str) or len(text) > MAX_PAYLOAD:
+        raise ValueError(f"not a snapshot3d QR payload (over {MAX_PAYLOAD} characters)")
     parts = text.split(formats.QR_SEP)
-    if len(parts) < 2 or not parts[0].startswith(formats.QR_MAGIC) or not parts[0][len(formats.QR_MAGIC):].isdigit():
+    version = parts[0][len(formats.QR_MAGIC):]
+    if len(parts) < 2 or not parts[0].startswith(formats.QR_MAGIC) or not (version.isascii() and version.isdigit()
+                                                                           and len(version) <= 6):
         raise ValueError(f"not a snapshot3d QR payload: {text[:40]!r}")
     fields = {}
-    try:
-        for p in parts[2:]:
-            key, _, val = p.partition("=")
-            fields[key] = tuple(float(v) for v in val.split(","))
-    except ValueError:
-        raise ValueError(f"malformed number in QR payload: {text[:60]!r}") from None
-    lengths = {"b": 6, "o": 3, "t": 3, "p": 2, "s": 1}
-    if any(k in fields and len(fields[k]) != n for k, n in lengths.items()):
-        raise ValueError(f"malformed field in QR payload: {text[:60]!r}")
-    planes = tuple(int(v) for v in fields["p"]) if "p" in fields else None
+    for p in parts[2:]:
+        key, _, val = p.partition("=")
+        if key not in _LENGTHS:
+            continue
+        try:
+            nums = tuple(float(v) for v in val.split(","))
+        except ValueError:
+            raise ValueError(f"malformed number in QR payload field {key}=: {text[:60]!r}") from None
+        if len(nums) != _LENGTHS[key]:
+            raise ValueError(f"malformed field {key}= in QR payload ({_LENGTHS[key]} numbers expected): "
+                             f"{text[:60]!r}")
+        if not all(math.isfinite(v) for v in nums):
+            raise ValueError(f"malformed field {key}= in QR payload (a number that is not finite): {text[:60]!r}")
+        fields[key] = nums
+    planes = None
+    if "p" in fields:
+        if not all(v.is_integer() and 0 <= v < 1 << 16 for v in fields["p"]):
+            raise ValueError(f"malformed field p= in QR payload (two integers in 0..65535 expected): {text[:60]!r}")
+        planes = tuple(int(v) for v in fields["p"])
     strength = fields["s"][0] if "s" in fields else None
-    return SheetMeta(int(parts[0][len(formats.QR_MAGIC):]), parts[1], fields.get("b"), fields.get("o"),
-                     fields.get("t"), planes, strength)
+    return SheetMeta(int(version), parts[1], fields.get("b"), fields.get("o"), fields.get("t"), planes, strength)
+
+
+def check_meta(meta: SheetMeta, where: str = "the snapshot's metadata", require_codec: bool = True) -> SheetMeta:
+    """UserError (one line, naming the field and its allowed range) unless every field of `meta` is usable:
+    a sheet format and codec this build reads (`check_codec`; without `require_codec` an unknown one is left
+    to the caller), a plane size the codec carries, a box, orbit and target within `snapshot3d.validate`'s
+    bounds, a strength in its range. Fields that are None are not required here. Returns `meta`."""
+    if require_codec:
+        check_codec(meta)
+    if meta.planes is not None and meta.codec in CODEC_MEDIUM:
+        from snapshot3d.codecs.media import medium_of
+
+        res, channels = meta.planes
+        error = medium_of(meta.codec).plane_error(channels, res)
+        if error:
+            raise UserError(f"{where}: plane size p={res},{channels} is out of range for codec {meta.codec} ({error})")
+    if meta.box is not None:
+        validate.check_box(meta.box, f"{where}: box b=")
+    if meta.orbit is not None:
+        validate.check_orbit(*meta.orbit, field=f"{where}: orbit o=")
+    if meta.target is not None:
+        validate.numbers(meta.target, f"{where}: target t=", 3, -validate.WORLD_LIMIT, validate.WORLD_LIMIT)
+    if meta.strength is not None:
+        validate.number(meta.strength, f"{where}: strength s=", *validate.STRENGTH_RANGE)
+    return meta
 
 
 def qr_matrix(text: str) -> np.ndarray:
@@ -118,13 +165,13 @@ def check_codec(meta: SheetMeta) -> None:
     if meta.version != formats.SHEET_FORMAT_VERSION:
         raise UserError(f"sheet format version {meta.version} is not supported (this build reads "
                         f"version {formats.SHEET_FORMAT_VERSION})")
-    if meta.codec not in formats.CODEC_MEDIUM:
-        known = ", ".join(f"{c} ({m})" for c, m in formats.CODEC_MEDIUM.items())
-        raise UserError(f"unknown codec id {meta.codec!r} in the snapshot's metadata or QR code: this build decodes "
+    if meta.codec not in CODEC_MEDIUM:
+        known = ", ".join(f"{c} ({m})" for c, m in CODEC_MEDIUM.items())
+        raise UserError(f"unknown codec id {validate.show(meta.codec)} in the snapshot's metadata or QR code: this build decodes "
                         f"{known}")
 
 
-def scene_meta(scene, codec: str = formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM], strength: float | None = 1.0) -> SheetMeta:
+def scene_meta(scene, codec: str = MEDIA[formats.DEFAULT_MEDIUM].codec, strength: float | None = 1.0) -> SheetMeta:
     """What a snapshot of `scene` (`snapshot3d.scene.Scene`) made with `codec` carries as metadata: box,
     orbit, plane size, embedding strength."""
     o = scene.orbit

@@ -24,12 +24,13 @@ from .diagnose import SHARPNESS_MIN, exposure_problem, sharpness
 from .fit import Fit, fit_geometry
 from .imageio_safe import read_image_bgr
 from .pilot import pilot_psnr
-from .qr import check_codec, decode_payload, read_qr
+from .qr import check_meta, decode_payload, read_qr
 from .rectify import OVERSAMPLE, photo_px_per_unit, rectify_sheet
 
 __all__ = ["ScanResult", "scan_image", "scan_file", "refuse_snapshot_file", "DETECT_SIDE", "MIN_SNAPSHOT_PX", "REPORT_KEYS"]
 
 DETECT_SIDE = 1400        # longest side of the detection copy (pixels)
+DETECT_MIN_SIDE = 64      # shortest side of the detection copy (pixels)
 MIN_SNAPSHOT_PX = 380     # at least one photo pixel per snapshot pixel: below, the snapshot is aliased
 MIN_CONTRAST = 0.3        # (paper - marker ink) / paper below this: washed out
 QR_MODULES = (21, 25, 29, 33)  # QR versions 1-4: the sheet's payloads fit these
@@ -102,7 +103,11 @@ def scan_image(img: np.ndarray) -> ScanResult:
     t = {}
     t0 = time.perf_counter()
     h, w = img.shape[:2]
-    factor = max(1, round(max(h, w) / DETECT_SIDE))
+    if min(h, w) < MIN_SNAPSHOT_PX:
+        raise UserError(f"the photo is {w}x{h} pixels: too small to hold a sheet (its snapshot alone needs at least "
+                        f"{MIN_SNAPSHOT_PX} px across)")
+    # the detection copy's longest side about DETECT_SIDE, its shortest at least DETECT_MIN_SIDE (a thin photo)
+    factor = max(1, min(round(max(h, w) / DETECT_SIDE), min(h, w) // DETECT_MIN_SIDE))
     found, gray = _find(img, factor)
     if len(found) < 3 and factor > 1:  # small or hard to see: look again at full resolution
         found2, _ = _find(img, 1)
@@ -217,10 +222,9 @@ def _read_qr(hi: np.ndarray, model: dict) -> dict | None:
         return None
     try:
         meta = decode_payload(text)
-    except ValueError:
-        raise UserError("the QR code on the sheet is not a snapshot3d code") from None
-    check_codec(meta)
-    return meta.as_dict()
+    except ValueError as e:
+        raise UserError(f"the QR code on the sheet is not a snapshot3d code ({e})") from None
+    return check_meta(meta, "the sheet's QR code").as_dict()
 
 
 def refuse_snapshot_file(path, img: np.ndarray) -> None:

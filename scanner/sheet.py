@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from snapshot3d import formats
+from snapshot3d.codecs.media import CODEC_MEDIUM
 from snapshot3d.errors import UserError
 
 from . import layout
@@ -119,7 +120,7 @@ def sheet_command(args) -> int:
             meta = read_snapshot(args.snapshot)[1]
         except UserError:
             pass
-    if formats.CODEC_MEDIUM.get(meta.codec) == "file":
+    if CODEC_MEDIUM.get(meta.codec) == "file":
         print(f"note: {Path(args.snapshot).name} was made for the file medium (codec {meta.codec}), which a printed "
               f"and photographed copy does not survive well; 'snapshot3d embed --medium print' makes one for printing",
               file=sys.stderr)

@@ -9,6 +9,8 @@ a file read back of another size is resized or realigned to 380x380 by `snapshot
 from __future__ import annotations
 
 import io
+import struct
+import warnings
 from pathlib import Path
 
 import cv2
@@ -20,7 +22,7 @@ from snapshot3d.errors import UserError
 
 from .imageio_safe import read_image_bgr, write_atomic
 from .pixelmeta import MAX_SHIFT, find_meta
-from .qr import SheetMeta, decode_payload, encode_payload
+from .qr import SheetMeta, check_meta, decode_payload, encode_payload
 
 __all__ = ["META_KEY", "encode_snapshot", "write_snapshot", "file_pixels", "snapshot_pixels", "read_snapshot", "snapshot_in_image", "metas_agree",
            "metadata_text"]
@@ -72,15 +74,22 @@ def snapshot_pixels(rgb: np.ndarray) -> np.ndarray:
 
 
 def metadata_text(path) -> str | None:
-    """The snapshot3d metadata text a file carries (PNG text chunk or JPEG comment), or None."""
+    """The snapshot3d metadata text a file carries (PNG text chunk or JPEG comment), or None. Pillow's
+    warnings (a large image, odd EXIF) are not printed."""
+    old = Image.MAX_IMAGE_PIXELS
     try:
-        with Image.open(path) as im:
-            text = im.info.get(META_KEY) or im.info.get("comment")
-    except (OSError, ValueError):
+        Image.MAX_IMAGE_PIXELS = None   # the caller has checked the size (`imageio_safe.image_size`)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(path) as im:
+                text = im.info.get(META_KEY) or im.info.get("comment")
+    except (OSError, ValueError, SyntaxError, EOFError, struct.error):
         return None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
     if isinstance(text, bytes):
         text = text.decode("utf-8", "replace")
-    return text or None
+    return text if isinstance(text, str) and text else None
 
 
 def metas_agree(a: SheetMeta, b: SheetMeta) -> bool:
@@ -108,7 +117,7 @@ def snapshot_in_image(name: str, rgb: np.ndarray, text: str | None, trust_text: 
     if text is None and found is None:
         return None
     if text is None:
-        return found[1], found[0], "pixels"
+        return found[1], check_meta(found[0], f"{name}: the mark in its pixels", require_codec=False), "pixels"
     try:
         meta = decode_payload(text)
     except ValueError as e:
@@ -116,6 +125,7 @@ def snapshot_in_image(name: str, rgb: np.ndarray, text: str | None, trust_text: 
     if found is not None and not trust_text and not metas_agree(meta, found[0]):
         raise UserError(f"{name}: its metadata text and the mark in its pixels disagree (an edited or "
                         f"mislabelled file); pass the sheet's QR text with --meta to choose")
+    check_meta(meta, f"{name}: its metadata", require_codec=False)
     if found is not None:
         return found[1], meta, "text"
     rgb = snapshot_pixels(rgb)

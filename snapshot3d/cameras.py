@@ -86,11 +86,18 @@ def view_camera(orbit, azimuth_deg: float, elevation_deg: float, distance: float
     """One camera of a scene's orbit moved anywhere on its sphere: c2w (1, 4, 4) float32 OpenGL and
     intrinsics (1, 4), looking at the orbit's target from `distance` world units (None: the orbit's
     radius) at `azimuth_deg` (0: the +x side, as view 0 of `orbit_cameras`; counter-clockwise seen from
-    above) and `elevation_deg` above the xy plane, with the orbit's field of view over size x size."""
-    from . import formats
+    above) and `elevation_deg` above the xy plane, with the orbit's field of view over size x size. UserError
+    (one line) when a number is out of `snapshot3d.validate`'s ranges (a request's parameters come here)."""
+    from . import formats, validate
+    from .errors import UserError
 
-    radius = orbit.radius if distance is None else float(distance)
-    c2w = orbit_poses(1, radius, elevation_deg, orbit.target, azimuth0_deg=azimuth_deg,
-                      up=formats.WORLD_UP).astype(np.float32)
+    radius = orbit.radius if distance is None else validate.number(distance, "distance", 0.0, 1e8)
+    validate.number(azimuth_deg, "azimuth_deg", -1e6, 1e6)
+    validate.number(elevation_deg, "elevation_deg", *validate.ELEVATION_RANGE)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c2w = orbit_poses(1, radius, elevation_deg, orbit.target, azimuth0_deg=azimuth_deg,
+                          up=formats.WORLD_UP).astype(np.float32)
+    if not np.isfinite(c2w).all() or np.all(c2w[0, :3, 3] == np.float32(orbit.target)):
+        raise UserError(f"distance {radius:g} is too close to the orbit's target for a camera")
     f = focal_from_fov(np.deg2rad(orbit.fov_deg), size)
     return c2w, np.array([[f, f, size / 2, size / 2]], np.float32)

@@ -9,10 +9,11 @@ __all__ = [
     "ORBIT_VIEWS", "ORBIT_SIZE", "ORBIT_ELEVATION_DEG", "ORBIT_FOV_DEG", "WORLD_UP", "BACKGROUND",
     "DENSITY_CLAMP", "RENDER_STEPS_PER_BOX", "OCC_RES", "OCC_ALPHA_THRESHOLD", "KB",
     # sheet and scan (issue 3)
-    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "FILE_CODEC", "FILE_CODECS", "PRINT_CODEC", "PRINT_CODECS", "MEDIA", "MEDIUM_CODEC", "CODEC_MEDIUM",
+    "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "FILE_CODEC", "FILE_CODECS", "PRINT_CODEC", "PRINT_CODECS", "MEDIA",
     "MARK_CODECS", "DEFAULT_MEDIUM", "FILE_REFINE_STEPS", "FILE_SCALE", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
     "MARKER_GAP", "MARGIN_X", "MARGIN_Y", "COLUMN_LEFT", "COLUMN_RIGHT", "SHEET_BOX", "MARKER_ORIGINS",
     "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "QR_MAGIC", "QR_SEP", "QR_FIELDS",
+    "SEVERITIES",
 ]
 
 SCENE_FORMAT_VERSION = 1
@@ -84,17 +85,19 @@ QR_BOX = (COLUMN_RIGHT, (SNAPSHOT_SIZE - MARKER_SIZE) // 2, COLUMN_RIGHT + MARKE
 QR_MAGIC = "S3D"
 QR_SEP = "|"
 QR_FIELDS = ("version", "codec", "box", "orbit")
+# The print-and-capture channel's severities, mildest first (`scanner.presets.PRESETS` holds one preset per
+# name): `none`, `jpeg90` and `jpeg75` are digital copies of the sheet image, the rest a print and a phone photo.
+SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")
 
 # --- media and their codecs (DESIGN 1.2) ---
 # A snapshot travels through one of two media, each with its own codec; the snapshot file's metadata and
 # the sheet's QR code name the codec, and decoding picks it from there (an unknown one is refused).
-PRINT_CODEC = "print-2"       # id of the print medium's codec that `embed` writes (`snapshot3d.print_layout`)
+PRINT_CODEC = "print-2"       # id of the print medium's codec that `embed` writes (`snapshot3d.codecs.print_embed`)
 PRINT_CODECS = (PRINT_CODEC, "print-1")   # the print codecs this build reads (print-1: no folded carriers)
 MEDIA = ("print", "file")
 FILE_CODEC = "hinet-3"        # id of the file medium's codec that `embed` writes (weights, ONNX and QR name it)
 FILE_CODECS = (FILE_CODEC, "hinet-2", "hinet-1")  # the file codecs this build reads (older snapshots name older ones)
-MEDIUM_CODEC = {"print": PRINT_CODEC, "file": FILE_CODEC}
-CODEC_MEDIUM = {**{codec: "print" for codec in PRINT_CODECS}, **{codec: "file" for codec in FILE_CODECS}}
+# (which codec belongs to which medium, and what each carries: `snapshot3d.codecs.media`)
 MARK_CODECS = ("hinet-1", "hinet-2", "print-1", "hinet-3", "print-2")   # a pixel mark's codec byte indexes this (append only, never reorder)
 DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is asked for as a file
 

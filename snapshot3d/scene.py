@@ -5,17 +5,18 @@ The file is an uncompressed numpy `.npz` with the arrays below and a JSON header
 """
 from __future__ import annotations
 
+import contextlib
 import json
-import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from . import formats
+from . import formats, scene_io, validate
 from .errors import UserError
 
-__all__ = ["Scene", "Orbit", "save_scene", "load_scene_file", "quantize_planes", "dequantize_planes"]
+__all__ = ["Scene", "Orbit", "save_scene", "load_scene_file", "check_orbit", "check_scene", "quantize_planes",
+           "dequantize_planes"]
 
 
 @dataclass(frozen=True)
@@ -80,39 +81,94 @@ def dequantize_planes(codes: np.ndarray) -> np.ndarray:
 
 
 def save_scene(scene: Scene, path) -> None:
-    """Write atomically: a partial file never stands at `path`."""
+    """Write atomically (its folder made when missing): a partial file never stands at `path`; UserError when
+    the scene is out of `check_scene`'s bounds or the file cannot be written."""
     path = Path(path)
+    check_scene(scene, path.name)
     header = {
         "format_version": formats.SCENE_FORMAT_VERSION, "decoder_version": scene.decoder_version,
         "name": scene.name, "orbit": asdict(scene.orbit), "meta": scene.meta,
     }
     tmp = path.with_name(path.name + ".partial")
-    with open(tmp, "wb") as f:
-        np.savez(f, codes=scene.codes, box=scene.box, header=np.frombuffer(json.dumps(header).encode(), np.uint8))
-    tmp.replace(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as f:
+            np.savez(f, codes=scene.codes, box=scene.box, header=np.frombuffer(json.dumps(header).encode(), np.uint8))
+        tmp.replace(path)
+    except OSError as e:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise UserError(f"cannot write {path} ({e.strerror or type(e).__name__})") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def load_scene_file(path, expect_decoder: str | None = formats.DECODER_VERSION) -> Scene:
-    """Read a `.s3d`; refuses a missing or corrupt file and a scene made for another decoder."""
+    """Read a `.s3d`; refuses (one-line UserError naming the field and its allowed range) a missing,
+    corrupt or oversized file, one whose arrays or header are malformed or out of range, and a scene made
+    for another decoder. Sizes are checked from the zip directory and the `.npy` headers before anything
+    is allocated (`validate.SCENE_MAX_BYTES`, `validate.SCENE_MAX_RES`, `formats.C_MAX`)."""
     path = Path(path)
     if not path.is_file():
         raise UserError(f"scene file not found: {path}")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            codes, box = z["codes"], z["box"]
-            header = json.loads(z["header"].tobytes().decode())
-    except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path} is not a snapshot3d scene file ({type(e).__name__})") from None
+    size = path.stat().st_size
+    if size > validate.SCENE_MAX_BYTES:
+        raise UserError(f"{path}: {size / 1e6:.1f} MB is larger than any scene file (limit "
+                        f"{validate.SCENE_MAX_BYTES / 1e6:.1f} MB)")
+    arrays = scene_io.read_arrays(path, _ARRAYS)
+    header = scene_io.parse_header(path, arrays["header"])
     if header.get("format_version") != formats.SCENE_FORMAT_VERSION:
-        raise UserError(f"{path}: scene format {header.get('format_version')} is not supported "
+        raise UserError(f"{path}: scene format {validate.show(header.get('format_version'))} is not supported "
                         f"(this build reads format {formats.SCENE_FORMAT_VERSION})")
     dec = header.get("decoder_version")
+    if not isinstance(dec, str) or len(dec) > 64:
+        raise UserError(f"{path}: header decoder_version must be a short text, got {validate.show(dec)}")
     if expect_decoder is not None and dec != expect_decoder:
         raise UserError(f"{path} was fitted for decoder {dec!r}, but this build has decoder {expect_decoder!r}; "
                         f"fit the scene again")
-    try:
-        return Scene(codes=codes, box=box, orbit=Orbit(**{k: (tuple(v) if isinstance(v, list) else v)
-                                                          for k, v in header["orbit"].items()}),
-                     decoder_version=dec, name=header.get("name", ""), meta=header.get("meta", {}))
-    except (TypeError, ValueError, KeyError) as e:
-        raise UserError(f"{path}: malformed scene ({e})") from None
+    name, meta = header.get("name", ""), header.get("meta", {})
+    if not isinstance(name, str) or not isinstance(meta, dict):
+        raise UserError(f"{path}: header name must be a text and meta an object")
+    return Scene(codes=arrays["codes"], box=validate.check_box(arrays["box"], f"{path}: box"),
+                 orbit=check_orbit(header.get("orbit"), f"{path}: orbit"), decoder_version=dec, name=name, meta=meta)
+
+
+_ARRAYS = {
+    "codes": scene_io.ArraySpec(dtypes=("u1",), ndim=4, check=lambda shape: (
+        shape[0] == 3 and 1 <= shape[1] <= formats.C_MAX and shape[2] == shape[3]
+        and 2 <= shape[2] <= validate.SCENE_MAX_RES),
+        allowed=f"(3, C, R, R) uint8 with C in 1..{formats.C_MAX}, R in 2..{validate.SCENE_MAX_RES}"),
+    "box": scene_io.ArraySpec(dtypes=("f4", "f8"), ndim=None, check=lambda shape: shape in ((2, 3), (6,)),
+                              allowed="(2, 3) float32"),
+    "header": scene_io.ArraySpec(dtypes=("u1",), ndim=1, check=lambda shape: shape[0] <= scene_io.MAX_HEADER_BYTES,
+                                 allowed=f"(N,) uint8 JSON text, N <= {scene_io.MAX_HEADER_BYTES}"),
+}
+
+
+def check_orbit(orbit, field: str = "orbit") -> Orbit:
+    """A scene header's orbit object {radius, elevation_deg, fov_deg, target} -> `Orbit`, each number within
+    `validate`'s bounds (elevation, fov and target may be left out: the defaults)."""
+    if not isinstance(orbit, dict):
+        raise UserError(f"{field} must be an object with radius, elevation_deg, fov_deg, target; got "
+                        f"{validate.show(orbit)}")
+    unknown = sorted(set(orbit) - {"radius", "elevation_deg", "fov_deg", "target"})
+    if unknown or "radius" not in orbit:
+        raise UserError(f"{field} needs radius (and may have elevation_deg, fov_deg, target); got keys "
+                        f"{validate.show(sorted(map(str, orbit)))}")
+    r, el, fov, target = validate.check_orbit(orbit["radius"], orbit.get("elevation_deg", formats.ORBIT_ELEVATION_DEG),
+                                              orbit.get("fov_deg", formats.ORBIT_FOV_DEG),
+                                              orbit.get("target", (0.0, 0.0, 0.0)), field)
+    return Orbit(r, el, fov, target)
+
+
+def check_scene(scene: Scene, where: str = "scene") -> Scene:
+    """UserError unless the scene's box and orbit are within `validate`'s bounds (what `load_scene_file`
+    accepts); returns `scene`."""
+    validate.check_box(scene.box, f"{where}: box")
+    o = scene.orbit
+    validate.check_orbit(o.radius, o.elevation_deg, o.fov_deg, o.target, f"{where}: orbit")
+    if scene.resolution > validate.SCENE_MAX_RES:
+        raise UserError(f"{where}: planes of {scene.resolution}x{scene.resolution} are over the scene file's limit "
+                        f"of {validate.SCENE_MAX_RES}")
+    return scene

@@ -1,12 +1,12 @@
-"""The capacity yardstick (`train.capacity`) and the oracle scanner (`train.oracle`) of `bench capacity`."""
+"""The capacity yardstick (`bench.capacity_model`) and the oracle scanner (`bench.oracle`) of `bench capacity`."""
 import cv2
 import numpy as np
 import pytest
 
-from snapshot3d.bench.capacity import psnr_at
+from snapshot3d.bench import capacity_model as capacity
+from snapshot3d.bench.capacity_model import psnr_at
+from snapshot3d.bench.oracle import oracle_correct
 from snapshot3d.metrics import psnr
-from snapshot3d.train.codec import capacity
-from snapshot3d.train.codec.oracle import oracle_correct
 
 
 def test_subbands_are_orthonormal_and_check_the_size(rng):

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import torch
 
-from snapshot3d import codec_layout, formats
+from snapshot3d import formats
+from snapshot3d.codecs import file_layout
 from snapshot3d.train.codec.channel import apply_channel, round_8bit
 from snapshot3d.train.codec.net import CodecNet, haar, ihaar
 
@@ -40,28 +41,28 @@ def test_codec_net_inverts_with_true_z_float64():
 @pytest.mark.parametrize("res,ch", [(64, 8), (48, 8), (32, 4)])
 def test_layout_round_trip(rng, res, ch):
     planes = rng.uniform(-1, 1, (3, ch, res, res)).astype(np.float32)
-    secret = codec_layout.planes_to_secret(planes)
-    assert secret.shape == (codec_layout.SECRET_CHANNELS, formats.CODEC_GRID, formats.CODEC_GRID)
-    assert np.abs(codec_layout.secret_to_planes(secret, res, ch) - planes).max() < 1e-4
+    secret = file_layout.planes_to_secret(planes)
+    assert secret.shape == (file_layout.SECRET_CHANNELS, formats.CODEC_GRID, formats.CODEC_GRID)
+    assert np.abs(file_layout.secret_to_planes(secret, res, ch) - planes).max() < 1e-4
     assert np.all(secret.reshape(3, formats.CODEC_CHANNELS, -1)[:, ch:] == 0)  # unused channels stay empty
 
 
 def test_layout_refuses_too_big_planes():
     with pytest.raises(ValueError, match="at most 8 channels"):
-        codec_layout.planes_to_secret(np.zeros((3, 12, 64, 64), np.float32))
+        file_layout.planes_to_secret(np.zeros((3, 12, 64, 64), np.float32))
     with pytest.raises(ValueError, match="64x64"):
-        codec_layout.planes_to_secret(np.zeros((3, 8, 96, 96), np.float32))
+        file_layout.planes_to_secret(np.zeros((3, 8, 96, 96), np.float32))
 
 
 def test_noise_estimate_tracks_true_error(rng):
     planes = _smooth_planes(rng)
-    secret = codec_layout.planes_to_secret(planes)
+    secret = file_layout.planes_to_secret(planes)
     for sigma in (0.02, 0.1):
         noisy = secret + rng.normal(0, sigma, secret.shape).astype(np.float32)
-        true = np.sqrt(np.mean((codec_layout.secret_to_planes(noisy, 64, 8) - planes) ** 2))
-        est = codec_layout.noise_estimate(noisy, 64, 8)
+        true = np.sqrt(np.mean((file_layout.secret_to_planes(noisy, 64, 8) - planes) ** 2))
+        est = file_layout.noise_estimate(noisy, 64, 8)
         assert 0.8 < est / true < 1.25, (sigma, est, true)
-    assert codec_layout.noise_estimate(secret, 64, 8) < 1e-4
+    assert file_layout.noise_estimate(secret, 64, 8) < 1e-4
 
 
 def test_channel_level_zero_is_8bit_only_and_level_one_hurts():

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from helpers import assert_one_line_error, run_cli
 
-from snapshot3d import codec_layout, formats
+from snapshot3d import formats
+from snapshot3d.codecs import file_layout
 from snapshot3d.metrics import psnr
 from snapshot3d.paths import asset
 from snapshot3d.scanner.backgrounds import load_host
@@ -21,7 +22,7 @@ def setup():
 
 
 def _plane_psnr(net, scene, snap: np.ndarray) -> float:
-    back = codec_layout.secret_to_planes(restore_secret(net, snap), scene.resolution, scene.channels)
+    back = file_layout.secret_to_planes(restore_secret(net, snap), scene.resolution, scene.channels)
     return 10 * np.log10(4.0 / np.mean((np.clip(back, -1, 1) - scene.planes()) ** 2))  # planes span [-1, 1]
 
 

@@ -6,8 +6,8 @@ both write any values (`embed_values`, `read_carriers`)."""
 import numpy as np
 import pytest
 
-from snapshot3d import print_layout as pl
 from snapshot3d.bench import digital_payload as dp
+from snapshot3d.codecs import print_carriers, print_embed, print_read, print_source
 from snapshot3d.paths import asset
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scene import load_scene_file
@@ -41,7 +41,7 @@ def test_source_code_is_embedded(scene):
 def test_clean_snapshot_decodes_every_layer(scene, snapshot):
     host, snap = snapshot
     host8 = np.round(host * 255) / 255
-    assert 10 * np.log10(1 / np.mean((snap / 255 - host8) ** 2)) == pytest.approx(pl.HOST_PSNR, abs=0.1)
+    assert 10 * np.log10(1 / np.mean((snap / 255 - host8) ** 2)) == pytest.approx(print_source.HOST_PSNR, abs=0.1)
     sizes = dp.layer_sizes(dp.DESIGN)
     planes, rd = dp.read_digital(snap, 16, 4, sent=dp.sent_bits(scene.planes()))
     assert rd.layers == len(sizes) and rd.bits == sum(s[2] for s in sizes)
@@ -61,8 +61,8 @@ def test_noisy_reading_keeps_only_layers_whose_crc_holds(scene, snapshot, rng):
 
 def test_print_carriers_read_the_same_through_the_general_reader(scene):
     host = load_host("builtin:coffee")
-    snap = pl.embed(host, scene.planes())
-    read, factor = pl.despread(snap, 16, 4)
-    r2, f2 = pl.read_carriers(snap, pl.print_layout(16, 4))
+    snap = print_embed.embed(host, scene.planes())
+    read, factor = print_read.despread(snap, 16, 4)
+    r2, f2 = print_read.read_carriers(snap, print_carriers.print_layout(16, 4))
     np.testing.assert_array_equal(read, r2)
     np.testing.assert_array_equal(factor, f2)

@@ -93,7 +93,7 @@ def test_print_graph_matches_the_numpy_receiver_on_real_captures(tmp_path):
 def test_print_graph_reads_every_plane_size_and_codec(tmp_path):
     """One graph, any layout: planes of other sizes than it was traced with, and print-1's layout (no folded
     carriers), read from a noisy snapshot as numpy reads them."""
-    from snapshot3d import print_feeds, print_layout
+    from snapshot3d.codecs import print_embed, print_feeds, print_read, print_source
     from snapshot3d.scanner.backgrounds import load_host
     graph = tmp_path / "restore-print.onnx"
     export_restore_print(graph)
@@ -101,10 +101,10 @@ def test_print_graph_reads_every_plane_size_and_codec(tmp_path):
     rng = np.random.default_rng(3)
     host = load_host("builtin:chelsea")
     for (r, c), codec in (((24, 4), "print-2"), ((48, 2), "print-2"), ((16, 4), "print-1")):
-        planes = print_layout.random_planes(r, c, rng)
-        snap = print_layout.embed(host, planes, codec=codec)
+        planes = print_source.random_planes(r, c, rng)
+        snap = print_embed.embed(host, planes, codec=codec)
         noisy = np.clip(snap + rng.normal(0, 4, snap.shape), 0, 255).astype(np.uint8)
-        want, reading = print_layout.restore(*print_layout.despread(noisy, r, c, codec=codec), r, c, codec=codec)
+        want, reading = print_read.restore(*print_read.despread(noisy, r, c, codec=codec), r, c, codec=codec)
         got, got_reading = sess.run(None, print_feeds.graph_feeds(noisy, r, c, codec))
         assert got.shape == (3, c, r, r) and np.abs(got - want).max() < 1e-4, (r, c, codec)
         assert np.allclose(got_reading, [reading.gain, reading.noise, reading.plane_rmse], rtol=1e-4)
@@ -114,17 +114,17 @@ def test_print_graph_rejects_a_degenerate_band_combination_as_numpy_does():
     """A severe photo (lego 48x4 in rocket, the decode bench's seed 1000) whose pilots make the combined filters
     blow up to 1e22: numpy's float64 check rejects them; the float32 graph once took them (inf / inf) and
     restored NaN planes. It must read the photo as numpy does."""
-    from snapshot3d import print_feeds, print_layout
+    from snapshot3d.codecs import print_embed, print_feeds, print_read
     from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scanner.qr import scene_meta
     from snapshot3d.scanner.roundtrip import capture
     from snapshot3d.scene import load_scene_file
     from snapshot3d.viewer.runtime import model_path
     scene = load_scene_file(Path(__file__).parents[1] / "bench" / "models" / "lego-print.s3d")
-    snap = print_layout.embed(load_host("builtin:rocket"), scene.planes())
+    snap = print_embed.embed(load_host("builtin:rocket"), scene.planes())
     cap = capture(snap, scene_meta(scene, "print-2"), "severe", 1000)
     r, c = scene.resolution, scene.channels
-    want, reading = print_layout.restore(*print_layout.despread(cap, r, c), r, c)
+    want, reading = print_read.restore(*print_read.despread(cap, r, c), r, c)
     got, got_reading = ort.InferenceSession(str(model_path("restore-print"))).run(None, print_feeds.graph_feeds(cap, r, c))
     assert np.isfinite(got).all() and np.abs(got - want).max() < 1e-4
     assert np.allclose(got_reading, [reading.gain, reading.noise, reading.plane_rmse], rtol=1e-4)
@@ -152,7 +152,7 @@ def test_shipped_models_are_current(tmp_path):
     fresh = FieldModels(ort.InferenceSession(str(project)), ort.InferenceSession(str(field)))
     for x, y in zip(grid_field(shipped, planes, 16, cells), grid_field(fresh, planes, 16, cells)):
         assert np.abs(x - y).max() < 1e-4
-    from snapshot3d import print_feeds
+    from snapshot3d.codecs import print_feeds
     export_restore_print(tmp_path / "p.onnx")
     feeds = print_feeds.graph_feeds((rng.uniform(0, 255, (380, 380, 3))).astype(np.uint8), 16, 4)
     a = ort.InferenceSession(str(model_path("restore-print"))).run(None, feeds)

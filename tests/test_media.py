@@ -11,6 +11,7 @@ import pytest
 from helpers import assert_one_line_error, run_cli
 
 from snapshot3d import formats
+from snapshot3d.codecs.media import CODEC_MEDIUM
 from snapshot3d.scanner.snapfile import read_snapshot
 from snapshot3d.scene import load_scene_file
 
@@ -99,7 +100,7 @@ def test_snapshots_of_every_file_codec_still_restore():
     that codec's own ONNX graph (tests/data/spot-snapshot-hinet-1.png and -hinet-2.png were made by them): the
     restored planes match what the codec's torch network reads, and a snapshot read with another codec's graph
     is much worse (so the pick matters)."""
-    from snapshot3d.codec_layout import secret_to_planes
+    from snapshot3d.codecs.file_layout import secret_to_planes
     from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scanner.qr import SheetMeta
     from snapshot3d.train.codec.hinet import codec_path, embed_planes, load_codec, restore_secret
@@ -124,7 +125,7 @@ def test_snapshots_of_every_file_codec_still_restore():
     for name, codec in (("spot-snapshot.png", formats.FILE_CODEC), ("spot-snapshot-hinet-2.png", "hinet-2"),
                         ("spot-snapshot-hinet-1.png", "hinet-1")):
         rgb, meta = read_snapshot(Path(__file__).parent / "data" / name)   # files made by embed, refined 20 steps
-        assert meta.codec == codec and formats.CODEC_MEDIUM[codec] == "file"
+        assert meta.codec == codec and CODEC_MEDIUM[codec] == "file"
         planes = restore_planes(rgb, meta)[0]
         assert float(10 * np.log10(4.0 / np.mean((planes - want) ** 2))) > 27.5, name  # 29.3 and 30.7 when made
 

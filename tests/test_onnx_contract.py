@@ -29,6 +29,38 @@ CONTRACT = {  # kind: (inputs, outputs) as (name, shape, dtype); str dims are sy
                       [("planes", [3, "C", "R", "R"], "tensor(float)"), ("reading", [3], "tensor(float)")]),
 }
 
+# Tolerances (docs/onnx-contract.md, "Conformance vectors", states the same). Another CPU's onnxruntime kernels
+# (AVX2 or AVX-512 blocking, FMA or not) sum in another order: a float32 sum of n terms then moves by at most
+# about n u sum|terms|, u = 2^-24 = 6e-8. The deepest sums are project's 2 x 64 + 36 = 164 terms (1e-5 of the
+# terms' size), field's 3 + 32 + 32 per point and the print receiver's 256 pilots, so a float32 graph output
+# compared on the same inputs must satisfy |got - want| <= ATOL + RTOL |want|, 10x that bound, scaled with the
+# value (field logits reach 48). A 1% drift of any value above 0.01 in size still fails it.
+RTOL, ATOL = 1e-4, 1e-4
+# restore_secret is stored as float16 (a relative step of 2^-10: 4.9e-4 rounding) after 33 convolutions.
+SECRET_RTOL, SECRET_ATOL = 2e-3, 2e-3
+# 8-bit codes: a value within a kernel difference of a half-code tie may round the other way; at most 0.1% of
+# the codes (98 of 98,304 for the vectors' planes) may differ, each by one code. Measured: 2 of 98,304.
+CODE_FLIP_SHARE = 1e-3
+# Float inputs that numpy makes (the layout's carriers and DCT, the interpolation weights): numpy's float64 sin, cos
+# and exp take other SIMD paths on other CPUs (AVX-512) and may differ in the last bit, which cast to float32 moves
+# a value by at most one float32 step (1.2e-7 of it): compare with 1e-6 of the value.
+INPUT_RTOL, INPUT_ATOL = 1e-6, 1e-9
+
+
+def _close(got, want, rtol=RTOL, atol=ATOL) -> bool:
+    """|got - want| <= atol + rtol |want| everywhere, and the same test refuses want drifted by 1% (the tolerance
+    still catches a real change on these values)."""
+    got, want = np.asarray(got, np.float64), np.asarray(want, np.float64)
+    if np.any(want != 0):
+        assert not np.all(np.abs(want * 1.01 - want) <= atol + rtol * np.abs(want)), "tolerance too loose for them"
+    return bool(np.all(np.abs(got - want) <= atol + rtol * np.abs(want)))
+
+
+def _code_flips_ok(codes, want_codes) -> bool:
+    """At most CODE_FLIP_SHARE of the 8-bit codes differ, each by one."""
+    d = np.abs(np.asarray(codes, int) - np.asarray(want_codes, int))
+    return d.max() <= 1 and np.mean(d > 0) <= CODE_FLIP_SHARE
+
 
 @pytest.fixture(scope="module")
 def vectors():
@@ -58,7 +90,12 @@ def test_graph_signature_and_doc_string(kind):
     assert len(meta.description) > 150, f"{kind}: the model carries no contract in its doc string"
     for name, _, _ in ins + outs:
         assert name in meta.description
-    assert {"codec_id", "decoder_version", "snapshot_size", "c_max"} <= set(meta.custom_metadata_map)
+    props = meta.custom_metadata_map
+    assert {"decoder_version", "snapshot_size", "c_max"} <= set(props)
+    if kind.startswith("restore"):   # the codec ids the graph reads, comma-separated, newest first
+        assert props["codec_id"] == {"restore": "hinet-3", "restore-print": "print-2,print-1"}[kind]
+    else:                            # the renderer's graphs serve every codec: they name none
+        assert "codec_id" not in props
     if kind == "restore":
         assert "(1, 24, 95, 95)" in meta.description and "RGB" in meta.description
 
@@ -84,11 +121,12 @@ def _codes(x):
 
 
 def test_restore_graph_reproduces_the_vectors(vectors):
-    rgb = cv2.cvtColor(cv2.imread(str(SNAPSHOT)), cv2.COLOR_BGR2RGB)
+    rgb = vectors["restore_snapshot"]
+    assert np.array_equal(rgb, cv2.cvtColor(cv2.imread(str(SNAPSHOT)), cv2.COLOR_BGR2RGB))  # the file's pixels
     x = (rgb.astype(np.float32) / 255).transpose(2, 0, 1)[None]
     secret = _session("restore").run(None, {"snapshot": x})[0][0]
     want = vectors["restore_secret"].astype(np.float32)
-    assert np.allclose(secret, want, atol=2e-3, rtol=2e-3), np.abs(secret - want).max()
+    assert _close(secret, want, SECRET_RTOL, SECRET_ATOL), np.abs(secret - want).max()
     # the page's unspread, from its text: X = P S P^T, P = pinv(U), first C channels of each plane
     meta = str(vectors["meta"])
     r, c = (int(v) for v in meta.split("|p=")[1].split("|")[0].split(","))
@@ -96,8 +134,7 @@ def test_restore_graph_reproduces_the_vectors(vectors):
     s = secret.reshape(3, 8, 95, 95)[:, :c].astype(np.float64)
     codes, want_codes = _codes(p @ s @ p.T), _codes(vectors["planes"].astype(np.float64))
     assert codes.shape == want_codes.shape == (3, c, r, r)
-    assert np.mean(codes == want_codes) > 0.999  # a value on a rounding edge may flip by one code
-    assert np.abs(codes - want_codes).max() <= 1
+    assert _code_flips_ok(codes, want_codes)  # a value on a rounding edge may flip by one code
     assert np.allclose(want_codes / 255 * 2 - 1, vectors["planes"], atol=1e-6)  # X = code / 255 * 2 - 1
 
 
@@ -116,14 +153,14 @@ def test_renderer_graphs_reproduce_the_vectors(vectors):
     padded = np.zeros((3, 12, r, r), np.float32)
     padded[:, :planes.shape[1]] = planes
     tables = _session("project").run(None, {"planes": padded, "interp": interp})[0]
-    assert tables.shape == (3, b * b, 32) and np.allclose(tables, vectors["project_tables"], atol=1e-4)
+    assert tables.shape == (3, b * b, 32) and _close(tables, vectors["project_tables"])
     cells = vectors["field_cells"]
     ix, iy, iz = cells.T
     rows = np.stack([iy * b + ix, iz * b + ix, iz * b + iy], 1).astype(np.int64)  # the page's rows
     assert np.array_equal(rows, vectors["field_rows"])
     logit, rgb = _session("field").run(None, {"tables": tables, "rows": rows})
-    assert np.allclose(logit, vectors["field_density_logit"], atol=1e-4)
-    assert np.allclose(rgb, vectors["field_rgb"], atol=1e-4) and rgb.min() >= 0 and rgb.max() <= 1
+    assert _close(logit, vectors["field_density_logit"])
+    assert _close(rgb, vectors["field_rgb"]) and rgb.min() >= 0 and rgb.max() <= 1
     assert logit.max() <= 15.0
 
 
@@ -139,39 +176,82 @@ def _print_feeds(vectors):
 def test_print_graph_reproduces_the_vectors(vectors):
     """The print graph on the vectors' capture and layout gives their planes; the layout is still what the print
     codec writes (a sheet printed long ago must still read), and its DCT matrix is the page's formula."""
-    from snapshot3d import print_feeds, print_layout
+    from snapshot3d.codecs import print_carriers, print_feeds
     feeds = _print_feeds(vectors)
     assert sorted(feeds) == sorted(print_feeds.PRINT_GRAPH_INPUTS)
     planes, reading = _session("restore-print").run(None, feeds)
-    assert np.allclose(planes, vectors["print_planes"], atol=1e-4), np.abs(planes - vectors["print_planes"]).max()
-    assert np.allclose(reading, vectors["print_reading"], rtol=1e-4)
+    assert _close(planes, vectors["print_planes"]), np.abs(planes - vectors["print_planes"]).max()
+    assert _close(reading, vectors["print_reading"], atol=0)   # reading's noise power is 1.5e-3: relative only
     meta = str(vectors["print_meta"])
     codec = meta.split("|")[1]
     r, c = (int(v) for v in meta.split("|p=")[1].split("|")[0].split(","))
     assert codec == "print-2" and planes.shape == (3, c, r, r)
-    for k, v in print_feeds.layout_feeds(print_layout.print_layout(r, c, codec)).items():
-        assert np.array_equal(v, feeds[k]), k
+    for k, v in print_feeds.layout_feeds(print_carriers.print_layout(r, c, codec)).items():
+        assert np.array_equal(v, feeds[k]) if v.dtype.kind == "i" else _close(v, feeds[k], INPUT_RTOL, INPUT_ATOL), k
     k, n = np.meshgrid(np.arange(r), np.arange(r), indexing="ij")   # D[k, n] from the page
     d = np.sqrt(np.where(k == 0, 1.0, 2.0) / r) * np.cos(np.pi * (2 * n + 1) * k / (2 * r))
     assert np.allclose(d, feeds["dct"], atol=1e-6)
 
 
 def test_vectors_are_the_product_path(vectors):
-    """The committed vectors equal what the product's own code makes from the shipped models now."""
-    from snapshot3d.export.conformance import make_vectors
-    fresh = make_vectors({k: model_path(k) for k in ("restore", "restore-print", "project", "field")})
+    """The committed vectors equal what the product's own code makes from the shipped models now, stage by stage:
+    each graph is compared on the committed inputs, so that a code rounded the other way upstream (one 8-bit step
+    moves a logit by up to 3e-2) is judged as a code, not as a float drift downstream."""
+    from snapshot3d.export.conformance import make_vectors, render_vectors
+    models = {k: model_path(k) for k in ("restore", "restore-print", "project", "field")}
+    fresh = make_vectors(models)
     assert sorted(fresh) == sorted(vectors)
+    fresh.update(render_vectors(models, vectors["planes"]))
+    code = lambda x: np.round((np.clip(x.astype(np.float32), -1, 1) + 1) / 2 * 255).astype(int)  # noqa: E731
     for k, v in vectors.items():
         if k == "print_capture":   # the scan of a photo: OpenCV's warps may round a rare pixel the other way elsewhere
-            d = np.abs(fresh[k].astype(int) - v.astype(int))
-            assert d.max() <= 1 and np.mean(d > 0) <= 1e-3, (k, d.max(), int((d > 0).sum()))
-        elif k == "print_planes":
-            assert np.abs(fresh[k] - v).max() < 0.02, k
-        elif k == "planes":   # 8-bit planes: a secret value on a rounding boundary may land one step (2/255) over on
-            # another CPU's onnxruntime (measured: 2 of 98304 values on one machine, the secret within 4.9e-4)
-            d = np.abs(fresh[k].astype(np.float32) - v.astype(np.float32))
-            assert d.max() <= 2 / 255 + 1e-6 and np.mean(d > 2e-3) <= 1e-3, (k, d.max(), int((d > 2e-3).sum()))
+            assert _code_flips_ok(fresh[k], v), (k, int((fresh[k] != v).sum()))
+        elif k == "print_planes":  # read from that capture: 0.1% of its values one code off moved them by 2.7e-3
+            assert np.abs(fresh[k] - v).max() <= 0.01, (k, np.abs(fresh[k] - v).max())
+        elif k == "planes":
+            assert _code_flips_ok(code(fresh[k]), code(v)), (k, int((code(fresh[k]) != code(v)).sum()))
+        elif k == "restore_secret":
+            assert _close(fresh[k], v, SECRET_RTOL, SECRET_ATOL), k
+        elif k == "print_reading":
+            assert _close(fresh[k], v, atol=0), k
+        elif k == "mark_dither":   # numpy's PCG64 draws: the same bits on every CPU
+            assert np.array_equal(fresh[k], v), k
+        elif v.dtype.kind == "f" and (k == "project_interp" or k.startswith("print_")):   # inputs numpy makes
+            assert _close(fresh[k], v, INPUT_RTOL, INPUT_ATOL), k
         elif v.dtype.kind == "f":
-            assert np.allclose(fresh[k].astype(np.float32), v.astype(np.float32), atol=2e-3), k
+            assert _close(fresh[k], v), (k, np.abs(fresh[k] - v).max())
         else:
             assert np.array_equal(fresh[k], v), k
+
+
+def test_pixel_mark_reads_as_the_page_says(vectors):
+    """The pixel metadata mark of the vectors' snapshot, read from the page's text alone (with the vectors' slots
+    and dithers, and a Viterbi decoder of the 133/171 code), gives the snapshot's metadata line."""
+    import struct
+    import zlib
+
+    from snapshot3d.scanner.pixelmeta import viterbi
+    luma = vectors["restore_snapshot"].astype(np.float64) @ [0.299, 0.587, 0.114]
+    k = np.arange(8)
+    c = np.sqrt(np.where(k == 0, 1.0, 2.0) / 8)[:, None] * np.cos((2 * k[None] + 1) * k[:, None] * np.pi / 16)
+    blocks = luma[:376, :376].reshape(47, 8, 47, 8)
+    coef = np.stack([np.einsum("iyjx,y,x->ij", blocks, c[u], c[v]) for u, v in ((0, 1), (1, 0), (1, 1))], -1)
+    coef = coef.reshape(-1)   # slot ((i * 47) + j) * 3 + f
+    step, nbytes = 32.0, 38
+    coded = 2 * (nbytes * 8 + 6)
+    repeat = 6627 // coded
+    slots = vectors["mark_slots"][:coded * repeat].reshape(coded, repeat)
+    soft = np.cos(2 * np.pi * (coef - vectors["mark_dither"] * step) / step)[slots].sum(1)
+    frame = np.packbits(viterbi(soft)).tobytes()
+    assert len(frame) == nbytes and struct.unpack("<I", frame[-4:])[0] == zlib.crc32(frame[:-4])
+    assert frame[0] == 2 and frame[1] == 1 and frame[2] == 3   # mark version, format version, codec 3: hinet-3
+    flags, pos, fields = frame[3], 4, []
+    for bit, fmt in enumerate(("<6e", "<3e", "<3e", "<2H", "<e")):
+        if flags >> bit & 1:
+            fields.append(struct.unpack_from(fmt, frame, pos))
+            pos += struct.calcsize(fmt)
+    meta = str(vectors["meta"])   # S3D1|hinet-3|b=...|o=...|t=...|p=R,C|s=...
+    want = [tuple(float(x) for x in part[2:].split(",")) for part in meta.split("|")[2:]]
+    assert len(fields) == len(want) == 5
+    for got, w in zip(fields, want):
+        assert np.allclose(got, w, rtol=1e-3, atol=1e-3), (got, w)   # float16 holds the text's 4 digits

@@ -12,6 +12,7 @@ import pytest
 from helpers import assert_one_line_error, run_cli
 
 from snapshot3d import formats
+from snapshot3d.codecs.media import CODEC_MEDIUM
 from snapshot3d.errors import UserError
 from snapshot3d.scanner import pixelmeta as pm
 from snapshot3d.scanner.backgrounds import load_host
@@ -75,7 +76,7 @@ def test_unknown_codec_index_reads_as_an_unknown_codec():
     body = bytearray(pm.pack(META)[:-4])
     body[2] = 200
     meta = pm.unpack(bytes(body) + struct.pack("<I", zlib.crc32(bytes(body))))
-    assert meta is not None and meta.codec == "mark-codec-200" and meta.codec not in formats.CODEC_MEDIUM
+    assert meta is not None and meta.codec == "mark-codec-200" and meta.codec not in CODEC_MEDIUM
 
 
 def test_a_meta_the_short_frame_cannot_hold_is_marked_in_the_long_one():

@@ -1,13 +1,13 @@
-"""The print channel's model (`snapshot3d.print_channel`): measured from a real simulated capture, it
+"""The print channel's model (`snapshot3d.codecs.print_channel`): measured from a real simulated capture, it
 predicts that capture's plane error; its limits behave (no noise: the digital restore; more noise: worse);
 the ladder's codec share inverts the e2e sum; the shipped constants are sane."""
 import numpy as np
 import pytest
 
 from snapshot3d import formats
-from snapshot3d import print_layout as pl
+from snapshot3d.codecs import print_embed, print_read
+from snapshot3d.codecs.print_channel import ChannelModel, measure, predicted_planes
 from snapshot3d.paths import asset
-from snapshot3d.print_channel import ChannelModel, measure, predicted_planes
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scene import load_scene_file
@@ -24,7 +24,7 @@ def captured():
 
     scene = load_scene_file(asset("spot-print.s3d"))
     host = load_host("builtin:chelsea")
-    snap = pl.embed(host, scene.planes())
+    snap = print_embed.embed(host, scene.planes())
     cap = capture(snap, scene_meta(scene, formats.PRINT_CODEC), "moderate", 1, sheet_dots=4)
     return scene, host, snap, cap
 
@@ -35,7 +35,7 @@ def test_model_measured_on_a_capture_predicts_its_error(captured):
     ch = measure(snap, cap, r, c)
     assert 0.1 < ch.gain < 2 and ch.unit > 0
     truth = scene.planes()
-    measured = _rmse(pl.restore(*pl.despread(cap, r, c, combine=False), r, c)[0], truth)   # the receiver it models
+    measured = _rmse(print_read.restore(*print_read.despread(cap, r, c, combine=False), r, c)[0], truth)   # the receiver it models
     rng = np.random.default_rng(0)
     predicted = np.median([_rmse(predicted_planes(host, truth, ch, rng), truth) for _ in range(4)])
     assert predicted == pytest.approx(measured, rel=0.25), (predicted, measured)
@@ -45,7 +45,7 @@ def test_model_limits(captured):
     scene, host, _, _ = captured
     r, c = scene.resolution, scene.channels
     truth, rng = scene.planes(), np.random.default_rng(1)
-    digital = _rmse(pl.restore(*pl.despread(pl.embed(host, truth), r, c, combine=False), r, c)[0], truth)   # as the model reads it
+    digital = _rmse(print_read.restore(*print_read.despread(print_embed.embed(host, truth), r, c, combine=False), r, c)[0], truth)   # as the model reads it
     clean = _rmse(predicted_planes(host, truth, ChannelModel(1.0, 1e-12), rng), truth)
     assert clean == pytest.approx(digital, rel=0.02)
     errors = [_rmse(predicted_planes(host, truth, ChannelModel(0.5, u), rng), truth) for u in (1.0, 10.0, 100.0)]

@@ -1,10 +1,11 @@
-"""The print codec's folded carriers (`print-2`, `snapshot3d.print_fold`): the helix reads back exactly, the
+"""The print codec's folded carriers (`print-2`, `snapshot3d.codecs.print_fold`): the helix reads back exactly, the
 strongest coefficients are the ones folded, the fold gains over the linear code `print-1` where the
 capture's noise is low, and snapshots of either codec restore only with their own carriers."""
 import numpy as np
 import pytest
 
-from snapshot3d import formats, print_fold, print_layout
+from snapshot3d import formats
+from snapshot3d.codecs import print_carriers, print_embed, print_fold, print_read, print_source
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import SheetMeta
 from snapshot3d.viewer.media import restore_planes
@@ -29,28 +30,28 @@ def test_unfold_reads_a_clean_helix_exactly_and_a_noisy_one_like_the_linear_carr
 
 
 def test_print2_folds_the_strongest_coefficients_and_print1_none():
-    one, two = print_layout.print_layout(16, 4, "print-1"), print_layout.print_layout(16, 4, "print-2")
-    assert len(one.folded) == 0 and one.carriers == print_layout.PILOTS + len(one.coef)
-    assert 250 <= len(two.folded) <= 350 and two.carriers == print_layout.PILOTS + len(two.coef) + 2 * len(two.folded)
+    one, two = print_carriers.print_layout(16, 4, "print-1"), print_carriers.print_layout(16, 4, "print-2")
+    assert len(one.folded) == 0 and one.carriers == print_carriers.PILOTS + len(one.coef)
+    assert 250 <= len(two.folded) <= 350 and two.carriers == print_carriers.PILOTS + len(two.coef) + 2 * len(two.folded)
     assert len(np.unique(two.chips)) == two.chips.size
     power = (two.scale ** 2 * two.prior)
     power[two.folded] /= print_fold.FOLD_LINEAR
     rest = np.setdiff1d(np.arange(len(two.coef)), two.folded)
     assert power[two.folded].min() >= power[rest].max()
     with pytest.raises(ValueError, match="unknown print codec 'print-9'"):
-        print_layout.print_layout(16, 4, "print-9")
+        print_carriers.print_layout(16, 4, "print-9")
 
 
 @pytest.fixture(scope="module")
 def planes():
-    return print_layout.random_planes(16, 4, np.random.default_rng(2))
+    return print_source.random_planes(16, 4, np.random.default_rng(2))
 
 
 def _through_model(snap, codec, unit, seed):
     """A capture as `print_channel`'s model has it (gain 0.55, noise `unit` per unit relative noise)."""
-    read, factor = print_layout.despread(snap, 16, 4, combine=False, codec=codec)
+    read, factor = print_read.despread(snap, 16, 4, combine=False, codec=codec)
     noisy = 0.55 * read + np.sqrt(unit * factor) * np.random.default_rng(seed).standard_normal(len(read))
-    return print_layout.restore(noisy, factor, 16, 4, codec=codec)
+    return print_read.restore(noisy, factor, 16, 4, codec=codec)
 
 
 def test_folding_gains_where_the_capture_is_clean(planes):
@@ -60,7 +61,7 @@ def test_folding_gains_where_the_capture_is_clean(planes):
     host = load_host("builtin:coffee")
     err = {}
     for codec in ("print-1", "print-2"):
-        snap = print_layout.embed(host, planes, codec=codec)
+        snap = print_embed.embed(host, planes, codec=codec)
         outs = [_through_model(snap, codec, 3.0, s) for s in range(3)]
         err[codec] = np.median([_rmse(est, planes) for est, _ in outs])
         for est, reading in outs:
@@ -72,7 +73,7 @@ def test_each_print_codec_restores_with_its_own_carriers(planes):
     """A print-1 snapshot (made before print-2) still restores when its metadata names it; read as
     print-2 it does not: the codec id travels with the snapshot for a reason."""
     host = load_host("builtin:chelsea")
-    snap = print_layout.embed(host, planes, codec="print-1")
+    snap = print_embed.embed(host, planes, codec="print-1")
     meta = SheetMeta(codec="print-1", planes=(16, 4))
     own, info = restore_planes(snap, meta)
     assert _rmse(own, planes) < 0.3 * planes.std() and info["plane_rmse_expected"] > 0

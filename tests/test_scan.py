@@ -11,6 +11,7 @@ from helpers import bomb_png
 
 from snapshot3d import formats
 from snapshot3d.builtin import shared_data_dir
+from snapshot3d.codecs.media import MEDIA
 from snapshot3d.errors import UserError
 from snapshot3d.metrics import psnr
 from snapshot3d.scanner.detect import detect_markers
@@ -50,7 +51,7 @@ def test_lossless_round_trip(sheet, snapshot):
     res = scan_image(img)
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) >= 40.0
     assert np.abs(res.corners - np.array(truth["corners"])).max() < 0.05
-    assert res.qr == {"version": 1, "codec": formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM], "box": [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0],
+    assert res.qr == {"version": 1, "codec": MEDIA[formats.DEFAULT_MEDIUM].codec, "box": [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0],
                       "orbit": [3.0, 20.0, 40.0], "target": None, "planes": None, "strength": None}
     assert tuple(res.report()) == REPORT_KEYS and res.confidence > 0.9
 
@@ -71,7 +72,7 @@ def test_mild_corners_subpixel(sheet, snapshot, seed):
     assert _snapshot_px_error(res.corners, true).max() <= 0.3
     assert np.linalg.norm(res.corners - true, axis=1).max() <= 0.3 * 3  # and under a pixel of the photo
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) > 18.0
-    assert res.qr is not None and res.qr["codec"] == formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM]
+    assert res.qr is not None and res.qr["codec"] == MEDIA[formats.DEFAULT_MEDIUM].codec
 
 
 def test_wrong_codec_in_qr(snapshot):

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from snapshot3d import formats
+from snapshot3d.codecs.media import MEDIA
 from snapshot3d.scanner import layout
 from snapshot3d.scanner.detect import detect_markers
 from snapshot3d.scanner.pdf import pdf_image
@@ -55,7 +56,7 @@ def test_sheet_pixels_markers_and_qr():
     text = read_qr(cv2.resize(crop, None, fx=2, fy=2, interpolation=cv2.INTER_NEAREST))
     assert text == encode_payload(meta)
     back = decode_payload(text)
-    assert back.codec == formats.MEDIUM_CODEC[formats.DEFAULT_MEDIUM] and back.version == formats.SHEET_FORMAT_VERSION
+    assert back.codec == MEDIA[formats.DEFAULT_MEDIUM].codec and back.version == formats.SHEET_FORMAT_VERSION
     np.testing.assert_allclose(back.box, meta.box) and np.testing.assert_allclose(back.orbit, meta.orbit)
 
 

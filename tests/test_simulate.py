@@ -86,7 +86,11 @@ def test_blur_kernel():
     assert k[k.shape[0] // 2, k.shape[0] // 2] == pytest.approx(k.max(), rel=0.5)
 
 
-def test_cli_severity_names_match_presets():
-    from snapshot3d.scanner.cli import SEVERITY_NAMES
+def test_severity_names_have_one_source():
+    """The presets, the command line and the benches name the severities of `formats.SEVERITIES`."""
+    from snapshot3d.bench.common import SEVERITIES as BENCH
+    from snapshot3d.cli import build_parser
     from snapshot3d.scanner.presets import SEVERITIES
-    assert SEVERITY_NAMES == SEVERITIES
+    assert tuple(PRESETS) == SEVERITIES == BENCH == formats.SEVERITIES
+    simulate = build_parser()._subparsers._group_actions[0].choices["simulate"]
+    assert next(a for a in simulate._actions if a.dest == "severity").choices == formats.SEVERITIES

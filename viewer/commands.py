@@ -12,24 +12,12 @@ import numpy as np
 from snapshot3d.errors import UserError
 from snapshot3d.images import contact_sheet, write_gif, write_png, write_views
 from snapshot3d.outputs import staged_folder
+from snapshot3d.validate import SAMPLES, VIEW_SIZE, check_views, integer
 
-__all__ = ["decode_command", "restore_command", "write_outputs", "decoded_mesh", "POOR_DB"]
+__all__ = ["decode_command", "restore_command", "write_outputs", "POOR_DB"]
 
 POOR_DB = 22.0
 """below this expected restore_psnr, decode warns that the views will be poor"""
-
-
-def decoded_mesh(baked, box):
-    """Vertex-coloured trimesh of a baked field (marching cubes where one reference step is half
-    opaque; colours read from the bake)."""
-    from snapshot3d.meshing import density_to_mesh
-
-    from .bake import sample_points
-    from .march import Frame
-
-    step = Frame.from_box(box).step
-    return density_to_mesh(np.exp(baked.grid[..., 0]), float(np.log(2.0) / step), np.asarray(box),
-                           lambda unit: sample_points(baked, unit)[1], cell_centred=True)
 
 
 def write_outputs(folder: Path, views: np.ndarray, report: dict, mesh=None) -> None:
@@ -61,12 +49,11 @@ def decode_command(args) -> int:
     from snapshot3d.scene import save_scene
 
     from .decode import decode_photo
+    from .mesh import decoded_mesh
     from .render import RenderConfig
 
-    if not 1 <= args.views <= 360 or not 16 <= args.size <= 2048:
-        raise UserError("--views must be in 1..360 and --size in 16..2048")
-    if args.samples < 1:
-        raise UserError("--samples must be >= 1")
+    check_views(args.views, args.size, (16, VIEW_SIZE[1]))
+    integer(args.samples, "--samples", *SAMPLES)
     with progress(args.views, "decode", unit="view") as bar:
         dec = decode_photo(args.photo, args.views, args.size, RenderConfig(samples=args.samples),
                            on_view=lambda i: bar.update(1))
@@ -89,20 +76,19 @@ def restore_command(args) -> int:
 
     from snapshot3d.progress import progress
     from snapshot3d.reports import write_json
-    from snapshot3d.scanner.qr import check_codec
+    from snapshot3d.scanner.qr import check_meta
     from snapshot3d.scanner.snapfile import read_snapshot
     from snapshot3d.scene import quantize_planes, save_scene
 
-    from .decode import scene_from_meta
-    from .media import restore_planes
+    from .decode import restore_checked, scene_from_meta
 
     if Path(args.output).suffix.lower() != ".s3d":
         raise UserError(f"cannot write {Path(args.output).name}: a scene is written as .s3d")
     with progress(2, "restore", unit="stage") as bar:
         rgb, meta = read_snapshot(args.snapshot, args.meta)
-        check_codec(meta)
+        check_meta(meta)   # a sheet format and codec this build reads
         t0 = time.perf_counter()
-        planes, info = restore_planes(rgb, meta)
+        planes, info = restore_checked(rgb, meta)
         secs = time.perf_counter() - t0
         bar.update(1)
         scene = scene_from_meta(quantize_planes(planes), meta)
@@ -118,16 +104,13 @@ def restore_command(args) -> int:
 
 def serve_command(args) -> int:
     """`snapshot3d serve`: the API and the page (uvicorn), until interrupted."""
-    import uvicorn
-
     from snapshot3d.options import config_from_args
 
     from .serve_config import ServeConfig
+    from .serve_http import run_server
     from .server import create_app
 
-    cfg = config_from_args(ServeConfig, args)
-    if not 1 <= cfg.max_decodes <= 64 or cfg.timeout_s <= 0 or cfg.max_scenes < 1:
-        raise UserError("--max-decodes must be in 1..64, --timeout-s > 0 and --max-scenes >= 1")
+    cfg = config_from_args(ServeConfig, args).checked()
     try:
         cfg.cache_dir().mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -140,5 +123,5 @@ def serve_command(args) -> int:
             raise UserError(f"cannot listen on {cfg.host}:{cfg.port} ({e.strerror}); pass another --port") from None
     app = create_app(cfg)
     print(f"snapshot3d serve: open http://{cfg.host}:{cfg.port}/ (API docs at /docs); scenes in {cfg.cache_dir()}")
-    uvicorn.run(app, host=cfg.host, port=cfg.port, log_level="warning")
+    run_server(app, cfg)
     return 0

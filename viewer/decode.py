@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from snapshot3d import formats
+from snapshot3d import formats, validate
 from snapshot3d.cameras import orbit_cameras
+from snapshot3d.codecs.media import CODEC_MEDIUM
 from snapshot3d.errors import UserError
 from snapshot3d.scene import Orbit, Scene, quantize_planes
 
@@ -25,7 +26,8 @@ from .quality import quality_estimate
 from .render import RenderConfig, pad_planes, render_views
 from .runtime import field_models
 
-__all__ = ["Decoded", "DecodedScene", "decode_scene", "decode_photo", "scene_from_meta", "read_input"]
+__all__ = ["Decoded", "DecodedScene", "decode_scene", "decode_photo", "scene_from_meta", "read_input",
+           "restore_checked"]
 
 
 @dataclass
@@ -56,13 +58,32 @@ def _meta(qr: dict | None):
 
 
 def _checked(meta):
-    from snapshot3d.scanner.qr import check_codec
+    from snapshot3d.scanner.qr import check_meta
 
-    check_codec(meta)
+    check_meta(meta)
     if meta.planes is None or meta.box is None:
         raise UserError("the snapshot's metadata lacks the plane size or the scene box (a sheet made without a "
                         "scene)")
     return meta
+
+
+def restore_checked(snapshot: np.ndarray, meta) -> tuple[np.ndarray, dict]:
+    """`media.restore_planes` of a snapshot and its checked metadata (`scanner.qr.check_meta`): planes
+    (3, C, R, R) float32 and the codec's info, every number finite. A reading the codec cannot measure (the
+    print codec's pilots: infinite noise, an expected error that is not a number: the snapshot does not carry
+    the planes its metadata names) is a UserError, as is a layout the codec refuses."""
+    try:
+        planes, info = restore_planes(snapshot, meta)
+    except ValueError as e:   # the codec's own layout checks
+        raise UserError(f"codec {meta.codec} cannot restore planes of {meta.planes[0]}x{meta.planes[0]}, "
+                        f"{meta.planes[1]} channels: {str(e).splitlines()[0]}") from None
+    bad = sorted(k for k, v in info.items() if isinstance(v, float) and not np.isfinite(v))
+    if bad or not np.all(np.isfinite(planes)):
+        what = ", ".join(f"{k} {info[k]}" for k in bad) or "planes not finite"
+        raise UserError(f"codec {meta.codec} read no usable signal for planes of {meta.planes[0]}x{meta.planes[0]}, "
+                        f"{meta.planes[1]} channels ({what}): the snapshot does not carry what its metadata names, or "
+                        f"is damaged past reading")
+    return planes, info
 
 
 def read_input(path):
@@ -96,6 +117,7 @@ class DecodedScene:
     baked: Baked
     planes: np.ndarray  # (3, C, R, R) float32 in [-1, 1], as restored (before quantisation)
     report: dict
+    snapshot: np.ndarray  # (380, 380, 3) uint8 RGB: the capture the restore read (rectified and colour-corrected)
 
 
 def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
@@ -103,7 +125,7 @@ def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
     t0 = time.perf_counter()
     res, snapshot, meta, source = read_input(path)
     t1 = time.perf_counter()
-    planes, codec_info = restore_planes(snapshot, meta)
+    planes, codec_info = restore_checked(snapshot, meta)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
     baked = bake_field(field_models(), pad_planes(planes), Frame.from_box(scene.box), cfg.bake)
@@ -114,14 +136,14 @@ def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
         "source": source,
         "detected": True, "confidence": None if res is None else round(float(res.confidence), 3),
         "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3)},
-        "codec": meta.codec, "medium": formats.CODEC_MEDIUM[meta.codec],
+        "codec": meta.codec, "medium": CODEC_MEDIUM[meta.codec],
         "quality_estimate": quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected")),
         "planes": list(meta.planes), "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
         "scan": None if res is None else {k: v for k, v in res.report().items()
                                           if k in ("corners", "reprojection_px", "qr")},
     }
-    return DecodedScene(scene, baked, planes, report)
+    return DecodedScene(scene, baked, planes, validate.finite_tree(report, "report"), snapshot)
 
 
 def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORBIT_SIZE,

@@ -55,11 +55,16 @@ def decode_grid(data: bytes) -> tuple[dict, np.ndarray]:
     if data[:8] != MAGIC or len(data) < 12:
         raise ValueError("not a snapshot3d grid (bad magic)")
     n = struct.unpack("<I", data[8:12])[0]
-    header = json.loads(data[12:12 + n])
-    b = int(header["res"])
+    try:
+        header = json.loads(data[12:12 + n])
+        b = int(header["res"])
+        lo, hi = (float(v) for v in header["logit_range"])
+    except (ValueError, KeyError, TypeError, RecursionError, OverflowError) as e:
+        raise ValueError(f"not a snapshot3d grid (header: {type(e).__name__})") from None
+    if 12 + n > len(data) or not 1 <= b <= 1024 or not (np.isfinite(lo) and np.isfinite(hi)):
+        raise ValueError("not a snapshot3d grid (header out of range)")
     cells = np.frombuffer(data, np.uint8, offset=12 + n)
     if cells.size != b ** 3 * 4:
         raise ValueError(f"grid payload is {cells.size} bytes, expected {b ** 3 * 4}")
     cells = cells.reshape(b, b, b, 4).transpose(2, 1, 0, 3).astype(np.float32)
-    lo, hi = header["logit_range"]
     return header, np.concatenate([lo + cells[..., 3:] / 255 * (hi - lo), cells[..., :3] / 255], -1)

@@ -1,7 +1,7 @@
 """The decode's quality estimate without ground truth: the `restore_psnr` a decode can expect, from what
 the capture itself says. Each codec ships a calibration written by `snapshot3d bench decode`:
 - print medium: the codec's own pilots measure the gain and the noise of this capture, hence the planes'
-  expected error (`print_layout.Reading.plane_rmse`); a line in its logarithm gives the restore_psnr;
+  expected error (`print_read.Reading.plane_rmse`); a line in its logarithm gives the restore_psnr;
 - file medium: the sheet's ArUco markers are a pilot signal that went through the same channel
   (`scanner.pilot.pilot_psnr`); a line in it gives the restore_psnr.
 numpy only."""
@@ -11,7 +11,7 @@ import json
 import math
 from functools import lru_cache
 
-from snapshot3d import formats
+from snapshot3d.codecs.media import CODEC_MEDIUM
 from snapshot3d.paths import asset
 
 __all__ = ["calibration_file", "load_calibration", "quality_estimate"]
@@ -31,7 +31,7 @@ def load_calibration(codec: str) -> dict | None:
 def predictor_value(codec: str, pilot_psnr: float | None, plane_rmse: float | None) -> float | None:
     """The number a codec's calibration line reads: log10 of the expected plane RMS error (print), or the
     markers' pilot_psnr in dB (file; None for a snapshot file, which has no markers)."""
-    if formats.CODEC_MEDIUM.get(codec) == "print":
+    if CODEC_MEDIUM.get(codec) == "print":
         return math.log10(max(plane_rmse, 1e-6)) if plane_rmse is not None else None
     return None if pilot_psnr is None else float(pilot_psnr)
 
@@ -40,7 +40,7 @@ def quality_estimate(codec: str, pilot_psnr: float | None, plane_rmse: float | N
     """The expected restore_psnr of a decode; `pilot_psnr` is the markers' (None for a snapshot file)."""
     cal = load_calibration(codec)
     x = predictor_value(codec, pilot_psnr, plane_rmse)
-    print_codec = formats.CODEC_MEDIUM.get(codec) == "print"
+    print_codec = CODEC_MEDIUM.get(codec) == "print"
     out = {"pilot_psnr_db": None if pilot_psnr is None else round(float(pilot_psnr), 2),
            "plane_rmse_expected": plane_rmse,
            "basis": "the codec's pilot carriers" if print_codec else

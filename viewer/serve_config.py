@@ -1,10 +1,12 @@
 """Settings of `snapshot3d serve` (one `--option` each; torch-free, no FastAPI import)."""
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from snapshot3d.errors import UserError
 from snapshot3d.options import config_field
 
 __all__ = ["ServeConfig", "default_cache"]
@@ -35,6 +37,25 @@ class ServeConfig:
                                             "`bench decode`'s sweep and saves about a tenth of a view's time)")
     keep_baked: int = config_field(8, "baked grids kept in memory for /render (each about 30 MB); others are "
                                       "baked again from their scene file on use")
+    read_timeout_s: float = config_field(15.0, "longest wait for the next piece of a request body (a body "
+                                               "shorter than its Content-Length, or a stalled upload); 408")
+    upload_timeout_s: float = config_field(120.0, "a whole request body must arrive within this; 408")
+    header_timeout_s: float = config_field(10.0, "a request line and its headers must arrive within this after "
+                                                 "the connection opens or the previous answer; 408")
+    max_header_kb: float = config_field(64.0, "largest request line and headers (kB); larger answers 431")
+
+    def checked(self) -> "ServeConfig":
+        """Self, or a UserError naming the first option out of its range (every number finite)."""
+        ranges = {"port": (0, 65535), "max_upload_mb": (0.001, 1e4), "max_pixels_mp": (0.01, 1e4),
+                  "max_decodes": (1, 64), "timeout_s": (0.01, 86400), "max_scenes": (1, 1e6),
+                  "max_cache_mb": (1, 1e7), "max_render_size": (16, 8192), "render_probe_div": (1, 64),
+                  "keep_baked": (1, 1024), "read_timeout_s": (0.01, 3600), "upload_timeout_s": (0.01, 86400),
+                  "header_timeout_s": (0.01, 3600), "max_header_kb": (1, 1024)}
+        for name, (lo, hi) in ranges.items():
+            v = getattr(self, name)
+            if not (math.isfinite(v) and lo <= v <= hi):
+                raise UserError(f"--{name.replace('_', '-')} {v!r} is out of range ({lo:g} to {hi:g})")
+        return self
 
     def cache_dir(self) -> Path:
         return Path(self.cache or default_cache())

@@ -6,13 +6,14 @@ Limits (`ServeConfig`): upload bytes (Content-Length checked before the body is 
 (read from the header before decoding; 413), concurrent decodes (a fixed number of slots; when all are
 busy, 503 with Retry-After: never an unbounded queue), a per-decode time limit (503; the late result is
 dropped, and its slot stays taken until it ends, so the bound holds), scenes kept (count and bytes,
-least recently used evicted)."""
+least recently used evicted), request bodies' read time (408, `viewer.serve_guard`). Everything a client
+sends answers 2xx, 4xx or 503; a 500 is a bug in the server (JSON too, its traceback in the log). Routes,
+limits and the malformed-HTTP answers: docs/serve-api.md."""
 from __future__ import annotations
 
 import asyncio
 import gzip
 import json
-import logging
 import re
 import secrets
 import shutil
@@ -24,18 +25,19 @@ from pathlib import Path
 
 from fastapi import FastAPI, File, Query, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.responses import FileResponse, Response
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from snapshot3d import __version__, formats
+from snapshot3d.codecs.print_feeds import layout_npz
 from snapshot3d.errors import UserError
-from snapshot3d.print_feeds import layout_npz
 from snapshot3d.scanner.imageio_safe import image_size
 
 from .render import RenderConfig
 from .runtime import model_path
 from .serve_config import ServeConfig
+from .serve_guard import ApiError, Guard, error_response, log_refusal, printable
 from .serving import BakedCache, mesh_file, orbit_view_png, render_png, write_scene
 from .store import SceneStore, StoreLimits
 
@@ -43,46 +45,10 @@ __all__ = ["ApiError", "create_app", "STATIC"]
 
 STATIC = Path(__file__).resolve().parent / "static"
 DECODE_PATH = "/v1/decode"
-MODEL_ROUTES = ("restore", "restore-print", "project", "field")
-log = logging.getLogger("snapshot3d.serve")
-
-
-class ApiError(Exception):
-    def __init__(self, status: int, message: str, headers: dict | None = None):
-        super().__init__(message)
-        self.status, self.message, self.headers = status, message, headers or {}
-
-
-def _error(status: int, message: str, headers: dict | None = None) -> JSONResponse:
-    return JSONResponse({"error": message.splitlines()[0] if message else "error"}, status, headers=headers)
-
-
-class UploadLimit:
-    """ASGI middleware: an upload to /v1/decode must state its length (411) within the limit (413); a
-    body longer than its stated length is cut off (400). Checked before the body is read."""
-
-    def __init__(self, app, max_bytes: int):
-        self.app, self.max_bytes = app, max_bytes
-
-    async def __call__(self, scope, receive, send):
-        if scope["type"] != "http" or scope["path"] != DECODE_PATH or scope["method"] != "POST":
-            return await self.app(scope, receive, send)
-        length = dict(scope["headers"]).get(b"content-length")
-        if length is None or not length.isdigit():
-            return await _error(411, "the upload must state its Content-Length")(scope, receive, send)
-        if int(length) > self.max_bytes:
-            return await _error(413, f"upload of {int(length) / 1e6:.1f} MB is over the "
-                                     f"{self.max_bytes / 1e6:.0f} MB limit")(scope, receive, send)
-        seen = 0
-
-        async def counted():
-            nonlocal seen
-            msg = await receive()
-            seen += len(msg.get("body", b""))
-            if seen > int(length):
-                raise ApiError(400, "the upload is longer than its Content-Length")
-            return msg
-        return await self.app(scope, counted, send)
+# `restore` is the file codec embed writes now; `restore-<codec>` names each file codec this build reads, so that
+# a client can fetch the graph an older snapshot's metadata names (docs/onnx-contract.md section 2)
+MODEL_ROUTES = ("restore", *(f"restore-{c}" for c in formats.FILE_CODECS), "restore-print", "project", "field")
+RENDER_DISTANCE = (0.01, 50.0)  # /render's distance, in orbit radii
 
 
 class Decoder:
@@ -128,7 +94,8 @@ class Decoder:
 def _links(sid: str) -> dict:
     base = f"/v1/scenes/{sid}"
     return {"views": [f"{base}/views/{i}.png" for i in range(formats.ORBIT_VIEWS)], "render": f"{base}/render",
-            "scene": f"{base}/scene.s3d", "mesh": f"{base}/mesh.glb", "grid": f"{base}/grid"}
+            "scene": f"{base}/scene.s3d", "mesh": f"{base}/mesh.glb", "grid": f"{base}/grid",
+            "capture": f"{base}/capture.png"}
 
 
 def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
@@ -138,42 +105,64 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
     # than splitting it over threads (the work is short numpy calls), and it leaves the other cores to other requests
     decoder = Decoder(cfg, store, baked)
     uploads = Path(tempfile.mkdtemp(prefix=".uploads.", dir=store.root))
-    app = FastAPI(title="snapshot3d", version=__version__,
+    app = FastAPI(title="snapshot3d", version=__version__, redirect_slashes=False,  # no 307 to a client's Host
                   description="Scan-and-view backend: upload a phone photo of a printed snapshot3d sheet, or a "
                               "snapshot file; get a scene id, its report and views; render any view on demand; "
                               "download the scene, the mesh or the baked grid. Errors are JSON "
                               '{"error": "<one line>"}.')
     app.state.config, app.state.store, app.state.decoder = cfg, store, decoder
-    app.add_middleware(UploadLimit, max_bytes=int(cfg.max_upload_mb * 1e6))
+    app.add_middleware(Guard, upload_path=DECODE_PATH, max_bytes=int(cfg.max_upload_mb * 1e6),
+                       read_timeout_s=cfg.read_timeout_s, upload_timeout_s=cfg.upload_timeout_s)
+
+    def _refuse(request, status: int, message: str, headers: dict | None = None):
+        log_refusal(request.scope, status, message)
+        return error_response(status, message, headers)
 
     @app.exception_handler(ApiError)
     async def _api_error(request, e: ApiError):
-        return _error(e.status, e.message, e.headers)
+        return _refuse(request, e.status, e.message, e.headers)
 
     @app.exception_handler(UserError)
     async def _user_error(request, e: UserError):
-        return _error(422, str(e))
+        return _refuse(request, 422, str(e))
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request, e: RequestValidationError):
         first = e.errors()[0] if e.errors() else {}
         where = ".".join(str(p) for p in first.get("loc", ()) if p not in ("query", "path", "body"))
-        return _error(422, f"invalid {where or 'request'}: {first.get('msg', 'malformed')}")
+        return _refuse(request, 422, f"invalid {where or 'request'}: {first.get('msg', 'malformed')}")
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request, e: StarletteHTTPException):
-        return _error(e.status_code, str(e.detail) if e.status_code != 404 else f"not found: {request.url.path}")
-
-    @app.exception_handler(Exception)
-    async def _crash(request, e: Exception):
-        log.exception("internal error on %s", request.url.path)
-        return _error(500, f"internal error ({type(e).__name__}); see the server's log")
+        message = str(e.detail) if e.status_code != 404 else f"not found: {printable(request.url.path)}"
+        return _refuse(request, e.status_code, message, getattr(e, "headers", None))
 
     def _folder(sid: str) -> Path:
         folder = store.folder(sid)
         if folder is None:
-            raise ApiError(404, f"no scene {sid!r} (unknown, or evicted from the cache)")
+            raise ApiError(404, f"no scene {sid[:40]!r} (unknown, or evicted from the cache)")
         return folder
+
+    def _read(sid: str, name: str) -> bytes:
+        """A file of the scene; 404 if the scene is unknown or was evicted (even while this request ran)."""
+        try:
+            return (_folder(sid) / name).read_bytes()
+        except FileNotFoundError:
+            raise ApiError(404, f"scene {sid!r} has no {name} (evicted from the cache, or decoded by an older "
+                                "version)") from None
+
+    def _made(sid: str, make, *args):
+        try:
+            return make(*args)
+        except FileNotFoundError:  # the scene was evicted while its view or mesh was made
+            raise ApiError(404, f"no scene {sid!r} (evicted from the cache)") from None
+
+    def _baked(sid: str):
+        folder = _folder(sid)
+        try:
+            return (folder, *baked.get(sid, folder))
+        except FileNotFoundError:
+            raise ApiError(404, f"no scene {sid!r} (evicted from the cache)") from None
 
     @app.get("/healthz", summary="liveness and limits")
     def healthz():
@@ -204,48 +193,61 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
 
     @app.get("/v1/scenes/{sid}", summary="a scene's report and links")
     def scene_info(sid: str):
-        report = json.loads((_folder(sid) / "report.json").read_text())
+        report = json.loads(_read(sid, "report.json"))
         return {"scene_id": sid, "report": report, **_links(sid)}
 
     @app.get("/v1/scenes/{sid}/render", summary="one view rendered on demand (PNG)",
              response_class=Response, responses={200: {"content": {"image/png": {}}}})
-    def render(sid: str, azimuth: float = Query(0.0, ge=-3600, le=3600, description="degrees; 0 = view 0"),
-               elevation: float = Query(formats.ORBIT_ELEVATION_DEG, ge=-89.9, le=89.9, description="degrees"),
-               distance: float | None = Query(None, gt=0, description="world units (default: the orbit radius)"),
-               size: int = Query(formats.ORBIT_SIZE, ge=16, description="pixels (square)")):
+    def render(sid: str, azimuth: float = Query(0.0, ge=-3600, le=3600, allow_inf_nan=False,
+                                                description="degrees; 0 = view 0"),
+               elevation: float = Query(formats.ORBIT_ELEVATION_DEG, ge=-89.9, le=89.9, allow_inf_nan=False,
+                                        description="degrees"),
+               distance: float | None = Query(None, gt=0, allow_inf_nan=False,
+                                              description="world units (default: the orbit radius); from 0.01x "
+                                                          "to 50x the orbit radius"),
+               size: int = Query(formats.ORBIT_SIZE, ge=16, description="pixels (square), at most "
+                                                                        "--max-render-size")):
         if size > cfg.max_render_size:
             raise ApiError(422, f"size {size} is over the {cfg.max_render_size} px limit")
-        folder = _folder(sid)
-        scene, b = baked.get(sid, folder)
-        if distance is not None and distance > 50 * scene.orbit.radius:
-            raise ApiError(422, f"distance {distance:g} is too far (at most 50x the orbit radius)")
+        folder, scene, b = _baked(sid)
+        radius = float(scene.orbit.radius)
+        if distance is not None and not RENDER_DISTANCE[0] * radius <= distance <= RENDER_DISTANCE[1] * radius:
+            raise ApiError(422, f"distance {distance:g} is out of range ({RENDER_DISTANCE[0] * radius:.4g} to "
+                                f"{RENDER_DISTANCE[1] * radius:.4g}: 0.01x to 50x the orbit radius)")
         return Response(render_png(scene, b, azimuth, elevation, distance, size, rcfg), media_type="image/png")
 
     @app.get("/v1/scenes/{sid}/views/{i}.png", summary="view i of the scene's orbit (as decode writes it)",
-             response_class=FileResponse)
+             response_class=Response, responses={200: {"content": {"image/png": {}}}})
     def view(sid: str, i: int):
         if not 0 <= i < formats.ORBIT_VIEWS:
             raise ApiError(404, f"view {i} does not exist (0..{formats.ORBIT_VIEWS - 1})")
-        folder = _folder(sid)
-        scene, b = baked.get(sid, folder)
-        return FileResponse(orbit_view_png(folder, scene, b, i, rcfg), media_type="image/png")
+        folder, scene, b = _baked(sid)
+        _made(sid, orbit_view_png, folder, scene, b, i, rcfg)
+        return Response(_read(sid, f"views/{i:03d}.png"), media_type="image/png")
 
-    @app.get("/v1/scenes/{sid}/scene.s3d", summary="the scene file", response_class=FileResponse)
+    @app.get("/v1/scenes/{sid}/capture.png", summary="the rectified, colour-corrected capture the restore graph "
+             "read (380x380 RGB; what `snapshot3d scan` writes)", response_class=Response,
+             responses={200: {"content": {"image/png": {}}}})
+    def capture(sid: str):
+        return Response(_read(sid, "capture.png"), media_type="image/png")
+
+    @app.get("/v1/scenes/{sid}/scene.s3d", summary="the scene file", response_class=Response,
+             responses={200: {"content": {"application/octet-stream": {}}}})
     def scene_file(sid: str):
-        return FileResponse(_folder(sid) / "scene.s3d", media_type="application/octet-stream",
-                            filename=f"{sid}.s3d")
+        return Response(_read(sid, "scene.s3d"), media_type="application/octet-stream",
+                        headers={"Content-Disposition": f'attachment; filename="{sid}.s3d"'})
 
     @app.get("/v1/scenes/{sid}/mesh.glb", summary="the scene as a coloured mesh (glTF binary)",
-             response_class=FileResponse)
+             response_class=Response, responses={200: {"content": {"model/gltf-binary": {}}}})
     def mesh(sid: str):
-        folder = _folder(sid)
-        scene, b = baked.get(sid, folder)
-        return FileResponse(mesh_file(folder, scene, b), media_type="model/gltf-binary")
+        folder, scene, b = _baked(sid)
+        _made(sid, mesh_file, folder, scene, b)
+        return Response(_read(sid, "mesh.glb"), media_type="model/gltf-binary")
 
     @app.get("/v1/scenes/{sid}/grid", summary="the baked grid (binary, gzip; format in viewer/gridfile.py)",
              response_class=Response, responses={200: {"content": {"application/octet-stream": {}}}})
     def grid(sid: str, request: Request):
-        data = (_folder(sid) / "grid.bin.gz").read_bytes()
+        data = _read(sid, "grid.bin.gz")
         if "gzip" not in request.headers.get("accept-encoding", ""):
             return Response(gzip.decompress(data), media_type="application/octet-stream")
         return Response(data, media_type="application/octet-stream", headers={"Content-Encoding": "gzip"})
@@ -255,7 +257,9 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
     def model(kind: str):
         if kind not in MODEL_ROUTES:
             raise ApiError(404, f"no model {kind!r} ({', '.join(MODEL_ROUTES)})")
-        return FileResponse(model_path(kind), media_type="application/octet-stream")
+        codec = kind.removeprefix("restore-") if kind.startswith("restore-hinet") else None
+        path = model_path("restore", codec) if codec else model_path(kind)
+        return FileResponse(path, media_type="application/octet-stream")
 
     @app.get("/v1/models/print-layout.npz", summary="the restore-print graph's layout inputs for one print codec and "
              "plane size (numpy .npz; docs/onnx-contract.md section 4)", response_class=Response,
@@ -265,7 +269,7 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
                             channels: int = Query(..., description="plane channels C")):
         try:
             data = layout_npz(codec, res, channels)
-        except ValueError as e:
+        except (ValueError, OverflowError) as e:
             raise ApiError(422, str(e)) from None
         return Response(data, media_type="application/octet-stream",
                         headers={"Cache-Control": "public, max-age=86400"})

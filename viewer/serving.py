@@ -12,8 +12,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from snapshot3d import formats
+from snapshot3d import formats, validate
 from snapshot3d.cameras import orbit_cameras, view_camera
+from snapshot3d.errors import UserError
 from snapshot3d.scanner.imageio_safe import write_atomic
 from snapshot3d.scene import load_scene_file, save_scene
 
@@ -54,13 +55,21 @@ class BakedCache:
 
 
 def write_scene(folder: Path, path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
-    """Decode the photo or snapshot file at `path` into `folder`: scene.s3d, report.json, grid.bin.gz."""
+    """Decode the photo or snapshot file at `path` into `folder`: scene.s3d, report.json, grid.bin.gz and
+    capture.png (the rectified, colour-corrected capture the restore read, (380, 380, 3) RGB). A non-finite
+    scene or report is refused (UserError) before anything is written."""
     ds = decode_scene(path, cfg)
+    report = dict(ds.report, views=formats.ORBIT_VIEWS, size=formats.ORBIT_SIZE)
+    validate.finite_tree(report, "report")   # save_scene checks the box and orbit
+    snap = np.asarray(ds.snapshot, np.uint8)
     save_scene(ds.scene, folder / "scene.s3d")
     grid = encode_grid(ds.baked.grid, ds.scene.box, ds.scene.orbit, Frame.from_box(ds.scene.box).step)
     (folder / "grid.bin.gz").write_bytes(gzip.compress(grid, compresslevel=6))
-    report = dict(ds.report, views=formats.ORBIT_VIEWS, size=formats.ORBIT_SIZE)
-    (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    (folder / "report.json").write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(snap, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise OSError("cannot encode the capture as PNG")
+    (folder / "capture.png").write_bytes(buf.tobytes())
     return ds
 
 
@@ -81,6 +90,9 @@ def render_png(scene, baked: Baked, azimuth: float, elevation: float, distance: 
                cfg: RenderConfig = RenderConfig()) -> bytes:
     """One view from anywhere on the scene's orbit sphere (`cameras.view_camera`) as PNG bytes."""
     c2w, intr = view_camera(scene.orbit, azimuth, elevation, distance, size)
+    if not (np.isfinite(c2w).all() and np.isfinite(intr).all() and intr[0, 0] > 0):
+        raise UserError(f"no camera at azimuth {azimuth:g}, elevation {elevation:g}, distance {distance}: "
+                        "it is degenerate for this scene")
     return png_bytes(_render(scene, baked, c2w, intr, size, cfg))
 
 
@@ -95,7 +107,7 @@ def orbit_view_png(folder: Path, scene, baked: Baked, i: int, cfg: RenderConfig 
 
 def mesh_file(folder: Path, scene, baked: Baked) -> Path:
     """mesh.glb of the scene (marching cubes on the bake, vertex colours), made once and kept."""
-    from .commands import decoded_mesh
+    from .mesh import decoded_mesh
 
     path = folder / "mesh.glb"
     if not path.is_file():

@@ -2,8 +2,8 @@
 token, published atomically (written into a hidden sibling, then renamed), bounded in count and bytes
 with least-recently-used eviction (a scene's folder mtime is its last use).
 
-Files of a scene: scene.s3d, report.json, grid.bin.gz (`viewer.gridfile`, gzip), and on first request
-views/NNN.png and mesh.glb (each written atomically)."""
+Files of a scene: scene.s3d, report.json, grid.bin.gz (`viewer.gridfile`, gzip), capture.png (the
+rectified capture the restore read), and on first request views/NNN.png and mesh.glb (each written atomically)."""
 from __future__ import annotations
 
 import os

@@ -18,7 +18,8 @@ import cv2
 import numpy as np
 import torch
 
-from snapshot3d import codec_layout, formats
+from snapshot3d import formats
+from snapshot3d.codecs import file_layout
 from snapshot3d.images import fit_square
 from snapshot3d.scene import Scene, load_scene_file
 
@@ -105,7 +106,7 @@ def crop_batch(data: CodecData, batch: int, crop: int, rng: np.random.Generator,
     for _ in range(batch):
         hosts.append(_host_crop(data.hosts[rng.integers(len(data.hosts))], crop, rng).transpose(2, 0, 1))
         planes = augment_planes(data.scenes[rng.integers(len(data.scenes))].planes(), rng)
-        sec = codec_layout.planes_to_secret(planes, grid)
+        sec = file_layout.planes_to_secret(planes, grid)
         y0, x0 = rng.integers(0, grid - g + 1, 2)
         secrets.append(sec[:, y0:y0 + g, x0:x0 + g])
     return torch.from_numpy(np.stack(hosts).astype(np.float32)), torch.from_numpy(np.stack(secrets))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from snapshot3d import formats
+from snapshot3d.codecs.media import MEDIA
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.presets import PRESETS
 from snapshot3d.scanner.qr import scene_meta
@@ -14,7 +14,7 @@ from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
 from snapshot3d.scene import load_scene_file
 
-from .commands import check_planes_for, snapshot_for
+from .embedding import check_planes_for, snapshot_for
 
 __all__ = ["make_example_command"]
 
@@ -29,7 +29,7 @@ def make_example_command(args) -> int:
     snap = snapshot_for(args.medium, load_host(args.host), scene, refine=args.refine)
     preset = PRESETS[args.severity]   # the preset's own 12 MP frame: a 5 MP photo of the sheet costs the print
     # medium 4-6 dB (the snapshot is then captured at below 1:1)
-    meta = scene_meta(scene, formats.MEDIUM_CODEC[args.medium])
+    meta = scene_meta(scene, MEDIA[args.medium].codec)
     data, ext, _ = simulate(render_sheet(snap, meta, 2), preset, args.seed)
     out = asset(EXAMPLE_PHOTO) if args.install else Path(args.output)
     write_atomic(out, data)

@@ -5,7 +5,7 @@ plus the config as JSON) beside a JSON summary of the run that made them.
 
 `embed_planes`: host (380, 380, 3) float RGB in [0, 1] and planes (3, C, R, R) in [-1, 1] ->
 snapshot (380, 380, 3) uint8 RGB. `restore_secret`: snapshot (380, 380, 3) uint8 RGB -> the secret
-(24, 95, 95) float32 (24 = 3 planes x 8 channels on the 95x95 grid of two Haar levels), turned into planes by `snapshot3d.codec_layout.secret_to_planes`.
+(24, 95, 95) float32 (24 = 3 planes x 8 channels on the 95x95 grid of two Haar levels), turned into planes by `snapshot3d.codecs.file_layout.secret_to_planes`.
 """
 from __future__ import annotations
 
@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from snapshot3d import codec_layout, formats
+from snapshot3d import formats
+from snapshot3d.codecs import file_layout
 from snapshot3d.paths import asset
 
 from ..weights import load_weights, save_weights
@@ -25,7 +26,7 @@ __all__ = ["build_codec", "secret_grid", "codec_path", "save_codec", "load_codec
 
 
 def build_codec(cfg: CodecConfig) -> CodecNet:
-    return CodecNet(codec_layout.SECRET_CHANNELS, cfg.blocks, cfg.width, cfg.layers, cfg.clamp, cfg.levels)
+    return CodecNet(file_layout.SECRET_CHANNELS, cfg.blocks, cfg.width, cfg.layers, cfg.clamp, cfg.levels)
 
 
 def secret_grid(net: CodecNet) -> int:
@@ -59,7 +60,7 @@ def embed_planes(net: CodecNet, host: np.ndarray, planes: np.ndarray, strength: 
     """host (380, 380, 3) float RGB in [0, 1], planes (3, C, R, R) in [-1, 1] -> snapshot uint8 RGB.
     `strength` scales the secret (1 = as trained): more is more robust and more visible."""
     _check_host(host)
-    secret = torch.from_numpy(codec_layout.planes_to_secret(planes, secret_grid(net)))[None] * strength
+    secret = torch.from_numpy(file_layout.planes_to_secret(planes, secret_grid(net)))[None] * strength
     h = torch.from_numpy(np.ascontiguousarray(host.transpose(2, 0, 1), np.float32))[None]
     snap, _ = net(h, secret)
     return (snap[0].clamp(0, 1).permute(1, 2, 0).numpy() * 255 + 0.5).astype(np.uint8)

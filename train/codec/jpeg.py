@@ -7,7 +7,7 @@ half-pixel centres). Here: JFIF colour (full range), 2x2 block means, the IJG qu
 Annex K tables at integer quality, an orthonormal 8x8 DCT as two small matrix products, kornia's
 polynomial rounding (round(x) + (x - round(x))^3, so gradients pass), the triangle upsampling. The image
 is padded to a multiple of 16 by repeating its last row and column, as libjpeg does. It is about 6x
-faster than kornia's and closer to OpenCV's files (README "Embed-time refinement").
+faster than kornia's and closer to OpenCV's files (docs/file-codec.md "Embed-time refinement").
 
 A file written at 2 or 4 times the image's size (each pixel a square, as `embed` writes a file snapshot)
 and read back by block means is computed at the image's own size: an 8x8 block then holds (8/s)^2 image

@@ -3,7 +3,7 @@ blocks between a host branch and a secret branch, and a learned constant standin
 part z on the way back.
 
 Layouts: host and snapshot (B, 3, H, W) RGB in [0, 1], H and W divisible by 2^levels; secret
-(B, Cs, H/2^levels, W/2^levels) on the host's wavelet grid (see `snapshot3d.codec_layout`). Forward: (host, secret) -> (snapshot, z);
+(B, Cs, H/2^levels, W/2^levels) on the host's wavelet grid (see `snapshot3d.codecs.file_layout`). Forward: (host, secret) -> (snapshot, z);
 reverse: snapshot -> (host estimate, secret estimate). Everything is plain convolution, slicing and
 reshapes, so the reverse pass exports to ONNX.
 """

@@ -1,5 +1,5 @@
 """Training captures of the print codec, made through the real channel: a host photo and a stand-in scene
-are embedded (`snapshot3d.print_layout`), laid out as a sheet, printed and photographed by `simulate`
+are embedded (`snapshot3d.codecs.print_embed`), laid out as a sheet, printed and photographed by `simulate`
 and rectified by `scan`, exactly the way a user's print goes. The restore network's front-end learns to
 tell the payload from the host and the print from these pairs. Made by worker processes (one per core),
 written in chunks that a later run skips (resumable).
@@ -93,16 +93,16 @@ def _host(spec: str, rng: np.random.Generator) -> np.ndarray:
 def make_capture(host_spec: str, seed: int, cfg: CaptureConfig = CaptureConfig()):
     """One training pair: (capture (380, 380, 3) uint8, snapshot (380, 380, 3) uint8, info dict), or None
     when `scan` does not find the sheet in the photo."""
-    from snapshot3d import print_layout
+    from snapshot3d.codecs import print_embed, print_source
     from snapshot3d.scanner.qr import SheetMeta
     from snapshot3d.scanner.roundtrip import capture as scan_capture
 
     rng = np.random.default_rng([cfg.seed, seed])
     res, ch = _PLANES[rng.integers(len(_PLANES))]
     host = _host(host_spec, rng)
-    planes = print_layout.random_planes(res, ch, rng)
+    planes = print_source.random_planes(res, ch, rng)
     target_db = float(rng.uniform(cfg.host_psnr_min, cfg.host_psnr_max))
-    snap = print_layout.embed(host, planes, target_db, codec=FRONT_END_CODEC)
+    snap = print_embed.embed(host, planes, target_db, codec=FRONT_END_CODEC)
     severity = str(rng.choice(_SEVERITIES, p=_SEVERITY_P))
     dots = int(rng.choice(_DOTS))
     meta = SheetMeta(codec=FRONT_END_CODEC, box=(-1, -1, -1, 1, 1, 1), orbit=(3.0, 20.0, 40.0), planes=(res, ch))

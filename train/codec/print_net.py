@@ -2,7 +2,7 @@
 
 A printed and photographed snapshot comes back blurred, halftoned, tone-shifted and noisy. The front-end
 maps the rectified capture to an estimate of the snapshot that was printed, in the bands that carry the
-payload (`snapshot3d.print_layout.PRINT_BANDS`); the fixed despreader then reads every carrier from it.
+payload (`snapshot3d.codecs.print_carriers.PRINT_BANDS`); the fixed despreader then reads every carrier from it.
 It is residual (the capture plus a learned correction that starts at zero), so at worst it is the linear
 reader, and it learns what no fixed filter can: to sharpen where the noise allows and to smooth the
 halftone and sensor noise away from the host's and the carriers' texture, with the context of about
@@ -18,8 +18,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from snapshot3d import bands as _bands
-from snapshot3d.print_layout import PRINT_BANDS
+from snapshot3d.codecs import bands as _bands
+from snapshot3d.codecs.print_carriers import PRINT_BANDS
 
 __all__ = ["FrontEnd", "pool_bands", "pool_loss"]
 
@@ -62,7 +62,7 @@ def _haar(x: Tensor):
 
 def pool_bands(img: Tensor) -> dict[str, Tensor]:
     """The carriers' bands of images (B, 3, H, W) (H, W multiples of 8, on the snapshot's 8-pixel grid):
-    band name -> (B, h, w), as `snapshot3d.bands.analyse` names them."""
+    band name -> (B, h, w), as `snapshot3d.codecs.bands.analyse` names them."""
     opp = torch.einsum("bchw,kc->bkhw", img, _OPP.to(img.device))
     out = {}
     for k, colour in enumerate(_bands.COLOURS):

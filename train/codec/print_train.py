@@ -2,7 +2,7 @@
 channel (`print_data`): crops of 128 x 128 on the snapshot's 8-pixel grid, flipped at random; the target is
 the snapshot that was printed, the loss its error in the carriers' bands, weighted as the despreader
 listens (`print_net.pool_loss`); the held-out loss is compared with the capture's own (the linear reader). The encoder
-is fixed (designed, `snapshot3d.print_layout`), so no gradient has to pass through the print: the real
+is fixed (designed, `snapshot3d.codecs.print_read`), so no gradient has to pass through the print: the real
 simulator and scanner make every training input. Resumable from a checkpoint; `--device` trains on a GPU
 when one is lent. The last 5% of the captures are held out and scored every few hundred steps.
 
@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from snapshot3d import formats, print_layout
+from snapshot3d import formats
+from snapshot3d.codecs import print_carriers
 from snapshot3d.errors import UserError
 
 from ..weights import load_weights, save_weights
@@ -50,16 +51,16 @@ def load_front_end(path: Path | None = None) -> tuple[FrontEnd, PrintCodecConfig
 def band_weights(capture: np.ndarray) -> dict[str, np.ndarray]:
     """How much the despreader listens to each place of each carrier band of a capture (380, 380, 3)
     uint8 (float32 maps, band -> (h, w)): the square of its matched filter's weight, the band's energy
-    weight over the cube of the print's noise power there (`print_layout.despread`, weighted)."""
-    noise = print_layout.band_noise(capture / 255.0)
-    scale = print_layout.PRINT_NOISE
-    return {b: (w / (noise[b] / scale) ** 3).astype(np.float32) for b, w in print_layout.PRINT_BANDS.items()}
+    weight over the cube of the print's noise power there (`print_read.despread`, weighted)."""
+    noise = print_carriers.band_noise(capture / 255.0)
+    scale = print_carriers.PRINT_NOISE
+    return {b: (w / (noise[b] / scale) ** 3).astype(np.float32) for b, w in print_carriers.PRINT_BANDS.items()}
 
 
 def _batch(caps, snaps, weights, idx, crop: int, rng: np.random.Generator):
     """Crops on the 8-pixel grid (inside the 376-pixel square that level 3 covers), flipped at random."""
     top = (formats.SNAPSHOT_SIZE // 8 * 8 - crop) // 8
-    xs, ys, ws = [], [], {b: [] for b in print_layout.PRINT_BANDS}
+    xs, ys, ws = [], [], {b: [] for b in print_carriers.PRINT_BANDS}
     for i in idx:
         y0, x0 = 8 * rng.integers(0, top + 1, 2)
         fy, fx = rng.random(2) < 0.5
@@ -168,4 +169,4 @@ def train_print_codec(cfg: PrintCodecConfig, caps: np.ndarray, snaps: np.ndarray
     last = [h for h in history if "held_out_loss" in h]
     return {"config": asdict(cfg), "steps": step, "held_out_loss_of_capture": zero,
             "held_out": last[-1] if last else None, "history": history[-6:], "codec": FRONT_END_CODEC,
-            "bands": print_layout.PRINT_BANDS, "params": int(sum(p.numel() for p in net.parameters()))}
+            "bands": print_carriers.PRINT_BANDS, "params": int(sum(p.numel() for p in net.parameters()))}

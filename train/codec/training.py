@@ -16,7 +16,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from snapshot3d import codec_layout, formats
+from snapshot3d import formats
+from snapshot3d.codecs import file_layout
 from snapshot3d.errors import UserError
 from snapshot3d.train.field.commands import orbit_cameras
 from snapshot3d.train.field.decoder import load_decoder
@@ -42,8 +43,8 @@ def host_loss(snap: torch.Tensor, host: torch.Tensor, low_weight: float) -> torc
 
 
 def secret_to_planes_t(secret: torch.Tensor, res: int, channels: int) -> torch.Tensor:
-    """torch twin of `codec_layout.secret_to_planes` for one (24, G, G) secret -> (3, C, R, R)."""
-    p = torch.from_numpy(codec_layout.unspread_matrix(res, secret.shape[-1]).astype(np.float32)).to(secret.device)
+    """torch twin of `file_layout.secret_to_planes` for one (24, G, G) secret -> (3, C, R, R)."""
+    p = torch.from_numpy(file_layout.unspread_matrix(res, secret.shape[-1]).astype(np.float32)).to(secret.device)
     s = secret.reshape(3, formats.CODEC_CHANNELS, secret.shape[-2], secret.shape[-1])[:, :channels]
     return p @ s @ p.T
 
@@ -165,7 +166,7 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
             fhost, scene = full_sample(data, rng)
             fhost, planes = fhost.to(dev), torch.from_numpy(scene.planes()).to(dev)
             grid = formats.SNAPSHOT_SIZE >> cfg.levels
-            fsnap, _ = net(fhost, torch.from_numpy(codec_layout.planes_to_secret(scene.planes(), grid))[None].to(dev))
+            fsnap, _ = net(fhost, torch.from_numpy(file_layout.planes_to_secret(scene.planes(), grid))[None].to(dev))
             _, frest = net.reverse(_channel(fsnap, (torch.rand(1, generator=gen) * top).to(dev), cfg, ranges, gen))
             prest = secret_to_planes_t(frest[0], scene.resolution, scene.channels)
             l_plane = F.mse_loss(prest, planes)

@@ -1,7 +1,7 @@
 """`fit --budget auto --medium M` (DESIGN section 4): fit a ladder of plane sizes and keep the one that gives
 the best `e2e_psnr` expected through medium M; the smallest rung within `tolerance_db` of the best wins.
 
-- `print`: each rung's own planes go through the print channel's model (`snapshot3d.print_channel`, its
+- `print`: each rung's own planes go through the print channel's model (`snapshot3d.codecs.print_channel`, its
   constants measured by `bench print-predict` and kept in `snapshot3d/assets/budget-curves.json`):
   embedded in each of `PREDICT_HOSTS`, read with the model's gain and noise, restored, and scored
   against the held-out views (the median over the hosts). The codec's share of the loss depends on the
@@ -49,7 +49,7 @@ def _curves() -> tuple[dict, object]:
 
 def print_channel():
     """The print channel's model (`print_channel.ChannelModel`) from budget-curves.json, or None."""
-    from snapshot3d.print_channel import ChannelModel
+    from snapshot3d.codecs.print_channel import ChannelModel
 
     ch = _curves()[0].get("print", {}).get("channel")
     return ChannelModel(float(ch["gain"]), float(ch["unit"])) if ch else None
@@ -58,7 +58,7 @@ def print_channel():
 def predicted_e2e(planes: np.ndarray, decoder, posed: PosedImages, channel, hosts=PREDICT_HOSTS, seed: int = 0) -> float:
     """The e2e_psnr (held-out views) expected of planes (3, C, R, R) printed and captured: the median over
     `hosts` of one draw of the channel model each."""
-    from snapshot3d.print_channel import predicted_planes
+    from snapshot3d.codecs.print_channel import predicted_planes
     from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scene import quantize_planes
 

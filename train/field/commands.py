@@ -17,6 +17,7 @@ from snapshot3d.outputs import staged_folder
 from snapshot3d.progress import progress
 from snapshot3d.reports import write_json
 from snapshot3d.scene import Orbit, Scene, load_scene_file, save_scene
+from snapshot3d.validate import MESH_RES, SCENE_MAX_RES, VIEW_SIZE, check_views, integer
 
 from .config import FitConfig, check_fit_config
 
@@ -104,6 +105,8 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
 
 def fit_command(args) -> int:
     cfg = check_fit_config(FitConfig(**{k: getattr(args, k) for k in FitConfig.__dataclass_fields__}))
+    integer(cfg.plane_res, "--plane-res", 2, SCENE_MAX_RES)   # what a scene file holds
+    integer(args.size, "--size", *VIEW_SIZE)
     out = Path(args.output)
     if out.suffix != ".s3d":
         raise UserError(f"{out}: the scene file must end in .s3d")
@@ -142,9 +145,8 @@ def render_scene(scene: Scene, views: int, size: int, show_progress: bool = True
 
 
 def render_command(args) -> int:
+    check_views(args.views, args.size)
     scene = load_scene_file(args.scene)
-    if args.views < 1 or args.size < 8:
-        raise UserError("--views must be >= 1 and --size >= 8")
     views = render_scene(scene, args.views, args.size)
     out = Path(args.output)
     with staged_folder(out) as tmp:
@@ -165,9 +167,8 @@ def mesh_command(args) -> int:
     from .field import decode, sample_planes
     from .sampler import BoxFrame
 
+    integer(args.res, "--res", *MESH_RES)
     scene = load_scene_file(args.scene)
-    if args.res < 8:
-        raise UserError("--res must be >= 8")
     if not str(args.output).lower().endswith((".glb", ".ply")):
         raise UserError(f"{args.output}: mesh output must end in .glb or .ply")
     decoder = load_decoder(scene.decoder_version)

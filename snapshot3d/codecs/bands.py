@@ -1,6 +1,6 @@
 """An orthonormal split of an image into spatial-frequency bands (numpy; torch-free): an opponent colour
 basis (luma, red-green, yellow-blue) and a three-level Haar transform. The print codec's carriers live in
-its detail bands (`snapshot3d.print_layout`); `train.codec.capacity` measures the channel per band with
+its detail bands (`codecs.print_carriers`); `bench.capacity_model` measures the channel per band with
 the same opponent basis.
 
 Image: (H, W, 3) float RGB, H and W multiples of 4. Coefficients: a dict band name -> float64 array,

@@ -1,14 +1,14 @@
 """The print-and-capture channel as the print codec's carriers see it, to predict what a scene's own planes
 keep through a print without printing them (numpy; `fit --budget auto --medium print` uses it).
 
-Model: a capture's carrier readings are `gain` times what the digital snapshot's read (`print_layout.
+Model: a capture's carrier readings are `gain` times what the digital snapshot's read (`print_read.
 despread`), plus Gaussian noise of power `unit` times each reading's relative noise power (the factor
 `despread` gives). The pilots measure both on a real capture (`measure`); `bench print-predict` takes
 their medians over `moderate` captures and checks the predictions against measured restores. The model
 is of the designed filters (`despread(..., combine=False)`), both on the digital copy (a clean copy has no
 channel to adapt to) and on the capture: `decode` combines the bands as the pilots measure them and reads
 up to 1 dB better than the model says. (A model measured through the combining receiver was tried: it
-over-predicted spot's 16x4 by 2.0 dB, against 0-1.0 dB under for this one; README "Predicting").
+over-predicted spot's 16x4 by 2.0 dB, against 0-1.0 dB under for this one; docs/fitting.md "The print channel's model").
 
 Why not a curve of payload size against restore_psnr: the loss depends on the scene's own plane spectrum
 (lego's 48x4 restored at 19.8 dB where spot's curve said 23.9); the linear receiver's error for given
@@ -19,7 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import print_layout as pl
+from .print_embed import embed
+from .print_read import despread, restore
+from .print_source import HOST_PSNR
 
 __all__ = ["ChannelModel", "measure", "predicted_planes"]
 
@@ -33,8 +35,8 @@ class ChannelModel:
 
 
 def _reading(image: np.ndarray, res: int, channels: int):
-    read, factor = pl.despread(image, res, channels, combine=False)   # the designed filters: see the module doc
-    return read, factor, pl.restore(read, factor, res, channels)[1]
+    read, factor = despread(image, res, channels, combine=False)   # the designed filters: see the module doc
+    return read, factor, restore(read, factor, res, channels)[1]
 
 
 def measure(snapshot: np.ndarray, capture: np.ndarray, res: int, channels: int) -> ChannelModel:
@@ -46,10 +48,10 @@ def measure(snapshot: np.ndarray, capture: np.ndarray, res: int, channels: int) 
 
 
 def predicted_planes(host: np.ndarray, planes: np.ndarray, channel: ChannelModel, rng: np.random.Generator,
-                     host_psnr: float = pl.HOST_PSNR) -> np.ndarray:
+                     host_psnr: float = HOST_PSNR) -> np.ndarray:
     """planes (3, C, R, R) in [-1, 1] embedded in host (380, 380, 3) float RGB in [0, 1] -> the planes a
     capture through `channel` restores (float32, one draw of its noise, before 8-bit rounding)."""
     _, c, r, _ = planes.shape
-    read, factor, _ = _reading(pl.embed(host, planes, host_psnr), r, c)
+    read, factor, _ = _reading(embed(host, planes, host_psnr), r, c)
     sim = channel.gain * read + np.sqrt(channel.unit * factor) * rng.standard_normal(len(read))
-    return pl.restore(sim, factor, r, c)[0]
+    return restore(sim, factor, r, c)[0]

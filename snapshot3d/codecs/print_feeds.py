@@ -1,8 +1,8 @@
 """The print codec's layout as the inputs of its ONNX restore graph (`restore-print.onnx`; numpy, torch-free).
 
-The graph (`export.print_graph`) is the designed receiver of `snapshot3d.print_layout` (matched filters
+The graph (`export.print_graph`) is the designed receiver of `codecs.print_read` (matched filters
 shaped by the capture's brightness, the bands combined as the pilots measure them, linear MMSE, and the
-folded coefficients' posterior of `snapshot3d.print_fold`) with nothing of a plane size in it: one graph
+folded coefficients' posterior of `codecs.print_fold`) with nothing of a plane size in it: one graph
 reads every plane size and both print codecs, and the layout of the snapshot's plane size and codec comes in
 as data. `docs/onnx-contract.md` section 4 states each array.
 
@@ -25,8 +25,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import formats, print_layout
-from .images import snapshot_nchw
+from snapshot3d import formats
+from snapshot3d.images import snapshot_nchw
+
+from .print_carriers import PRINT_BANDS, PrintLayout, print_layout
+from .print_read import Reading
+from .print_source import prior_spectrum
 
 __all__ = ["LAYOUT_INPUTS", "PRINT_GRAPH_INPUTS", "PRINT_GRAPH_OUTPUTS", "dct_matrix", "layout_feeds",
            "graph_feeds", "reading_of", "layout_npz"]
@@ -46,15 +50,15 @@ def dct_matrix(res: int) -> np.ndarray:
     return d
 
 
-def layout_feeds(lay: print_layout.PrintLayout) -> dict[str, np.ndarray]:
-    """A layout (`print_layout.print_layout`) as the graph's layout inputs (see the module doc)."""
-    if lay.bands != print_layout.PRINT_BANDS:
-        raise ValueError("the restore graph reads the codec's own bands (print_layout.PRINT_BANDS) only")
+def layout_feeds(lay: PrintLayout) -> dict[str, np.ndarray]:
+    """A layout (`print_carriers.print_layout`) as the graph's layout inputs (see the module doc)."""
+    if lay.bands != PRINT_BANDS:
+        raise ValueError("the restore graph reads the codec's own bands (print_carriers.PRINT_BANDS) only")
     res, m = lay.res, len(lay.coef)
     size = 3 * lay.channels * res * res
     place = np.full(size, m, np.int64)
     place[lay.coef] = np.arange(m)
-    rest = np.tile(print_layout.prior_spectrum(res).ravel(), 3 * lay.channels)[place == m].sum()
+    rest = np.tile(prior_spectrum(res).ravel(), 3 * lay.channels)[place == m].sum()
     f32 = (lambda x: np.ascontiguousarray(x, np.float32))
     return {"chips": lay.chips.astype(np.int64), "base": f32(lay.base), "place": place, "scale": f32(lay.scale),
             "prior": f32(lay.prior), "pilots": f32(lay.pilot_amp * lay.pilot_signs),
@@ -68,13 +72,13 @@ def graph_feeds(snapshot: np.ndarray, res: int, channels: int, codec: str = form
     n = formats.SNAPSHOT_SIZE
     if snapshot.shape != (n, n, 3) or snapshot.dtype != np.uint8:
         raise ValueError(f"a print capture is ({n}, {n}, 3) uint8 RGB, got {snapshot.shape} {snapshot.dtype}")
-    return {"snapshot": snapshot_nchw(snapshot), **layout_feeds(print_layout.print_layout(res, channels, codec))}
+    return {"snapshot": snapshot_nchw(snapshot), **layout_feeds(print_layout(res, channels, codec))}
 
 
-def reading_of(reading: np.ndarray) -> print_layout.Reading:
-    """The graph's `reading` output (3,) -> `print_layout.Reading`."""
+def reading_of(reading: np.ndarray) -> Reading:
+    """The graph's `reading` output (3,) -> `print_read.Reading`."""
     gain, noise, rmse = (float(v) for v in np.asarray(reading, np.float64).ravel()[:3])
-    return print_layout.Reading(gain, noise, rmse)
+    return Reading(gain, noise, rmse)
 
 
 @lru_cache(maxsize=16)
@@ -83,5 +87,5 @@ def layout_npz(codec: str, res: int, channels: int) -> bytes:
     array per name of `LAYOUT_INPUTS`, in the graph's dtypes): what `snapshot3d serve` hands a client that
     restores on its own. ValueError for a codec or plane size the print medium does not carry."""
     buf = io.BytesIO()
-    np.savez_compressed(buf, **layout_feeds(print_layout.print_layout(res, channels, codec)))
+    np.savez_compressed(buf, **layout_feeds(print_layout(res, channels, codec)))
     return buf.getvalue()

@@ -1,5 +1,6 @@
-"""How much a capture channel can carry (numpy only): a yardstick for the codec under Gaussian
-assumptions, measured from real snapshots and the captures `scan` makes of them.
+"""How much a capture channel can carry (numpy only): a yardstick for the codecs under Gaussian
+assumptions, measured from real snapshots and the captures `scan` makes of them (`bench capacity`,
+`bench codec --medium print`, `bench print-digital`).
 
 The channel is taken as linear per subband: a snapshot is split into an orthonormal opponent colour
 basis and a 3-level orthonormal Haar transform (`subbands`); in each subband b the capture is
@@ -9,7 +10,8 @@ coding); the embedding may add a perturbation whose mean square per pixel value 
 D = 10^(-host_psnr / 10) (the host-fidelity target). Water-filling that power over the subbands
 (`waterfill`) gives the Gaussian capacity C in bits (`capacity_bits`). By the separation theorem the
 smallest mean-square error any codec can restore N plane values of variance v with is
-v * 2^(-2C / N) (`best_plane_rmse`).
+v * 2^(-2C / N) (`best_plane_rmse`); a scene's curve of `restore_psnr` against i.i.d. plane noise
+(`noise_curve`) turns that error into the best `restore_psnr` (`psnr_at`).
 
 Approximations, so it is a yardstick, not a proof: noise that is not Gaussian carries a little more,
 and a plane source that is not Gaussian compresses better than v * 2^(-2R / N); subbands coarser than
@@ -21,11 +23,19 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["OPPONENT", "QUANT_NOISE", "subbands", "fit_channel", "waterfill", "capacity_bits", "best_plane_rmse", "LEVELS"]
+from snapshot3d.metrics import psnr
+from snapshot3d.scene import dequantize_planes, quantize_planes
+
+from .common import ViewJudge
+
+__all__ = ["OPPONENT", "QUANT_NOISE", "subbands", "fit_channel", "waterfill", "capacity_bits", "best_plane_rmse", "LEVELS",
+           "NOISE_SIGMAS", "noise_curve", "psnr_at"]
 
 LEVELS = 3
 QUANT_NOISE = 1.0 / (12 * 255.0 ** 2)
 """noise floor per coefficient: the embedding itself must be rounded to 8 bits (uniform, 1/255 steps)"""
+NOISE_SIGMAS = (0.004, 0.01, 0.02, 0.04, 0.07, 0.1, 0.15, 0.2, 0.3, 0.45)
+"""the i.i.d. plane noise levels of `noise_curve`"""
 # orthonormal RGB -> (luma, red-green, yellow-blue): mean squares are kept, JPEG's chroma shows apart
 OPPONENT = np.array([[1, 1, 1], [1, -1, 0], [1, 1, -2]], np.float64) / np.sqrt([[3.0], [2.0], [6.0]])
 
@@ -91,3 +101,22 @@ def capacity_bits(gain: np.ndarray, noise: np.ndarray, count: np.ndarray, host_p
 def best_plane_rmse(bits: float, n_values: int, variance: float) -> float:
     """Smallest RMS error N Gaussian values of `variance` can be restored with through `bits` (separation)."""
     return float(np.sqrt(variance * 2.0 ** (-2.0 * bits / n_values)))
+
+
+def noise_curve(judge: ViewJudge, seed: int = 0) -> list[tuple[float, float]]:
+    """(plane RMS error, restore_psnr) of the scene's planes plus i.i.d. Gaussian noise, as carried (8-bit)."""
+    rng = np.random.default_rng(seed)
+    planes = judge.scene.planes()
+    out = []
+    for sigma in NOISE_SIGMAS:
+        noisy = dequantize_planes(quantize_planes(planes + rng.normal(0, sigma, planes.shape).astype(np.float32)))
+        rmse = float(np.sqrt(np.mean((noisy - planes) ** 2)))
+        out.append((rmse, psnr(judge.views(noisy), judge.ref)))
+    return out
+
+
+def psnr_at(curve: list[tuple[float, float]], rmse: float) -> float:
+    """restore_psnr at a plane RMS error, interpolated on log(rmse); clamped to the measured range."""
+    x = np.log([c[0] for c in curve])
+    y = np.array([c[1] for c in curve])
+    return float(np.interp(np.log(max(rmse, 1e-9)), x, y))

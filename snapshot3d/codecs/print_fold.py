@@ -20,7 +20,7 @@ __all__ = ["FOLD_CSNR_DB", "FOLD_TURNS", "FOLD_LINEAR", "helix", "unfold"]
 
 FOLD_CSNR_DB = 5.8
 """a coefficient is folded when its design power is at least this many dB above the design noise (about
-300 coefficients at every plane size the print medium carries; chosen by measurement, README "The print codec")"""
+300 coefficients at every plane size the print medium carries; chosen by measurement, docs/print-codec.md "Choosing the fold")"""
 FOLD_TURNS = 2.0
 """radians of the helix per prior standard deviation of the coefficient"""
 FOLD_LINEAR = 0.6

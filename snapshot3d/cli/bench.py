@@ -2,12 +2,12 @@
 live in `snapshot3d.bench` and are imported when a command runs (the product never imports them)."""
 from __future__ import annotations
 
-from .formats import FILE_REFINE_STEPS
-from .lazy import lazy_command as _run
+from snapshot3d.formats import FILE_REFINE_STEPS, MEDIA, SEVERITIES
+from snapshot3d.lazy import lazy_command as _run
 
-__all__ = ["add_bench_commands"]
+from .common import add_command as add
 
-_SEVERITIES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")
+__all__ = ["add_commands"]
 
 
 def _out(p) -> None:
@@ -47,8 +47,12 @@ def _print_sweep(p, scenes_help: str, severities: str) -> None:
     p.add_argument("--severities", default=severities, help="comma-separated severities")
 
 
-def add_bench_commands(bsub, add) -> None:
-    """Add every benchmark to the `bench` subparsers `bsub`; `add(sub, name, help, func)` makes a parser."""
+def add_commands(sub) -> None:
+    """Add `bench` and every benchmark under it to the top-level subparsers `sub`. A benchmark is one block
+    below: `add(bsub, NAME, HELP, _run(MODULE, FUNCTION))`, `_out(p)`, its options, then `_quick(p, ...)`
+    with the settings of its smoke run."""
+    b = add(sub, "bench", "benchmarks: write CSV, JSON and PNG charts under bench/results/", None)
+    bsub = b.add_subparsers(dest="what", required=True, metavar="WHAT")
     bf = add(bsub, "fit", "field_psnr against scene_kb and fit time, spot and lego; training throughput",
              _run("snapshot3d.bench.fit", "bench_fit_command"))
     _out(bf)
@@ -65,6 +69,16 @@ def add_bench_commands(bsub, add) -> None:
     bv.add_argument("--deadline-s", type=float, default=300.0, help="clients stop retrying after this")
     _quick(bv, uploads=6, renders=5)
 
+    bz = add(bsub, "fuzz", "hostile inputs (issue 36) against the readers, the command lines and a live serve: "
+                           "counts per class and outcome (tracebacks, 5xx, non-finite, partial output, memory)",
+             _run("snapshot3d.bench.fuzz", "bench_fuzz_command"))
+    _out(bz)
+    bz.add_argument("--seed", type=int, default=36, help="seed of every mutation (the same seed, the same inputs)")
+    bz.add_argument("--scale", type=float, default=1.0, help="multiplies the count of mutated inputs per class")
+    bz.add_argument("--per-class", type=int, default=2, help="command lines per class also run as subprocesses")
+    bz.add_argument("--workers", type=int, default=2, help="processes for the in-process inputs")
+    _quick(bz)
+
     bp = add(bsub, "print-predict", "the print channel's model fitted on moderate captures, and its per-scene "
                                      "restore predictions against measured restores (writes the model to "
                                      "budget-curves.json)", _run("snapshot3d.bench.print_predict",
@@ -76,7 +90,7 @@ def add_bench_commands(bsub, add) -> None:
     bp.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
     bp.add_argument("--seeds", type=int, default=3, help="captures per scene and host")
     bp.add_argument("--draws", type=int, default=2, help="noise draws per host for a prediction")
-    bp.add_argument("--severity", default="moderate", choices=_SEVERITIES, help="capture severity")
+    bp.add_argument("--severity", default="moderate", choices=SEVERITIES, help="capture severity")
     bp.add_argument("--size", type=int, default=128, help="view size for restore_psnr")
     _quick(bp, scenes="spot-r16c4,lego-print", hosts="chelsea", heldout=0, seeds=1, draws=1)
 
@@ -118,7 +132,7 @@ def add_bench_commands(bsub, add) -> None:
                             "charts (codec.* for the file medium, codec_print.* for the print medium)",
              _run("snapshot3d.bench.codec", "bench_codec_command"))
     _out(bc)
-    bc.add_argument("--medium", default="file", choices=("file", "print"), help="which medium's codec to measure")
+    bc.add_argument("--medium", default="file", choices=MEDIA, help="which medium's codec to measure")
     bc.add_argument("--scenes", default=None,
                     help="comma-separated scene files to evaluate (spot is never trained on; default: file "
                          "snapshot3d/assets/spot.s3d,cache/scenes/lego.s3d; print bench/models/spot-print.s3d,"
@@ -199,9 +213,9 @@ def add_bench_commands(bsub, add) -> None:
     bd.add_argument("--scene", default="snapshot3d/assets/spot-print.s3d", help="scene of the end-to-end photos "
                                                                                  "and the sweep (print medium)")
     bd.add_argument("--seeds", type=int, default=20, help="simulated photos")
-    bd.add_argument("--severity", default="moderate", choices=_SEVERITIES, help="simulated print-and-capture severity")
+    bd.add_argument("--severity", default="moderate", choices=SEVERITIES, help="simulated print-and-capture severity")
     bd.add_argument("--host", default="chelsea", help="bundled host photo (held out from codec training)")
-    bd.add_argument("--sweep-severity", default="moderate", choices=_SEVERITIES, help="capture the settings sweep runs on")
+    bd.add_argument("--sweep-severity", default="moderate", choices=SEVERITIES, help="capture the settings sweep runs on")
     bd.add_argument("--repeats", type=int, default=3, help="timed decodes per sweep setting (median)")
     bd.add_argument("--calib-scenes", default="bench/models/spot-print.s3d,bench/models/lego-print.s3d",
                     help="scenes of the quality estimate's calibration captures")

@@ -1,19 +1,17 @@
-"""Command-line options of the scanner-side commands (`sheet`, `simulate`, `scan`).
-
-Kept torch-free and import-light: the work is imported lazily when a command runs."""
+"""Options of the scanner-side commands: `sheet`, `simulate` and `scan` (numpy and OpenCV when they run)."""
 from __future__ import annotations
 
+from snapshot3d.formats import SEVERITIES
 from snapshot3d.lazy import lazy_command as _run
 
-__all__ = ["add_commands", "SEVERITY_NAMES"]
+from .common import add_command as _add
 
-SEVERITY_NAMES = ("none", "jpeg90", "jpeg75", "mild", "moderate", "severe")  # = scanner.presets.SEVERITIES
+__all__ = ["add_commands"]
 
 
-def add_commands(sub, add) -> None:
-    """Add the scanner's subcommands to the top-level subparsers `sub`; `add(sub, name, help, func)` makes a
-    parser."""
-    s = add(sub, "sheet", "lay out a snapshot as a printable sheet (markers, colour patches, QR code)",
+def add_commands(sub) -> None:
+    """Add sheet, simulate and scan to the top-level subparsers `sub`."""
+    s = _add(sub, "sheet", "lay out a snapshot as a printable sheet (markers, colour patches, QR code)",
             _run("snapshot3d.scanner.sheet", "sheet_command"))
     s.add_argument("snapshot", help="380x380 snapshot (.png from `snapshot3d embed`, which carries its metadata)")
     s.add_argument("-o", "--output", required=True,
@@ -23,17 +21,17 @@ def add_commands(sub, add) -> None:
     s.add_argument("--scene", help="scene file (.s3d) whose box and orbit go into the QR code (a snapshot from "
                                    "`embed` carries them already)")
 
-    m = add(sub, "simulate", "photograph a printed sheet through a simulated printer, scene and phone camera",
+    m = _add(sub, "simulate", "photograph a printed sheet through a simulated printer, scene and phone camera",
             _run("snapshot3d.scanner.commands", "simulate_command"))
     m.add_argument("sheet", help="sheet written by `snapshot3d sheet` (.png, or the .pdf with its .png beside it)")
     m.add_argument("-o", "--output", required=True, help="photo to write (.jpg; .png keeps the channel's JPEG "
                                                          "losslessly; severity none needs .png)")
-    m.add_argument("--severity", default="mild", choices=SEVERITY_NAMES,
+    m.add_argument("--severity", default="mild", choices=SEVERITIES,
                    help="channel preset (parameters in scanner/presets.py)")
     m.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same photo")
     m.add_argument("--truth", help="write the true snapshot corners and the preset's parameters here (JSON)")
 
-    c = add(sub, "scan", "find the sheet in a photo and rectify the snapshot (numpy + OpenCV)",
+    c = _add(sub, "scan", "find the sheet in a photo and rectify the snapshot (numpy + OpenCV)",
             _run("snapshot3d.scanner.commands", "scan_command"))
     c.add_argument("photo", help="photo of a printed sheet (JPEG or PNG)")
     c.add_argument("-o", "--output", required=True, help="rectified, colour-corrected 380x380 snapshot (.png)")

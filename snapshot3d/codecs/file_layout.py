@@ -16,7 +16,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import formats
+from snapshot3d import formats
+
+from .media import FILE
 
 __all__ = ["spread_matrix", "unspread_matrix", "planes_to_secret", "secret_to_planes", "noise_estimate",
            "SECRET_CHANNELS", "check_plane_shape"]
@@ -47,11 +49,10 @@ def unspread_matrix(res: int, grid: int = formats.CODEC_GRID) -> np.ndarray:
 
 
 def check_plane_shape(channels: int, res: int) -> None:
-    """ValueError unless the codec has room for (3, channels, res, res) planes."""
-    if not (1 <= channels <= formats.CODEC_CHANNELS and 2 <= res <= formats.CODEC_MAX_RES):
-        raise ValueError(f"the codec carries planes of at most {formats.CODEC_CHANNELS} channels and "
-                         f"{formats.CODEC_MAX_RES}x{formats.CODEC_MAX_RES}; this scene has {channels} channels "
-                         f"of {res}x{res} (refit with --plane-channels {formats.CODEC_CHANNELS})")
+    """ValueError unless the codec has room for (3, channels, res, res) planes (`media.FILE`'s limits)."""
+    error = FILE.plane_error(channels, res)
+    if error:
+        raise ValueError(error)
 
 
 def planes_to_secret(planes: np.ndarray, grid: int = formats.CODEC_GRID) -> np.ndarray:

@@ -1,0 +1,172 @@
+"""Reading the `print` medium's carriers back (numpy; torch-free): the designed receiver, the reference of
+the restore graph (`export.print_graph`, `restore-print.onnx`).
+
+Each carrier is read by its matched filter (shaped and weighted by the capture's brightness,
+`print_carriers.filters`); the bands are combined as the pilots say this capture kept them
+(`band_weights`); the pilots measure the channel's gain and noise, and the plane coefficients are the
+linear MMSE estimate (for `print-2`'s folded coefficients, the posterior mean of `print_fold.unfold`).
+
+Layouts: image (380, 380, 3) uint8 RGB or float in [0, 1]; readings and their relative noise powers (N,)
+float in `print_carriers` order (pilots first); planes (3, C, R, R) float32, not clipped.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from snapshot3d import formats
+
+from . import bands, print_fold
+from .print_carriers import PILOTS, PrintLayout, filters, flat, noise_map, print_layout
+from .print_source import plane_idct, prior_spectrum
+
+__all__ = ["despread", "read_carriers", "band_response", "band_weights", "Reading", "restore", "restore_layout"]
+
+
+def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | None = None,
+             weighted: bool = True, combine: bool = True, codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, np.ndarray]:
+    """What each carrier of (3, channels, res, res) planes reads in an image: `read_carriers` of their
+    layout under `codec`."""
+    return read_carriers(image, print_layout(res, channels, codec), capture, weighted, combine)
+
+
+def read_carriers(image: np.ndarray, lay: PrintLayout, capture: np.ndarray | None = None,
+                  weighted: bool = True, combine: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """What each carrier reads in an image (380, 380, 3) (uint8, or float in [0, 1]): the readings (N,)
+    and each reading's relative noise power (N,). The carriers' shapes follow the brightness of
+    `capture` (default: the image itself; give the capture when `image` is the front-end's payload
+    estimate). `weighted`: a matched filter that also listens less where the print is noisier (the
+    darks), for a raw capture; else matched to the carriers only (the front-end has weighed the places).
+    `combine` (weighted only): the bands are combined as the pilots say this capture kept them
+    (`band_weights`), not as designed."""
+    img = image.astype(np.float64) / 255.0 if image.dtype == np.uint8 else np.asarray(image, np.float64)
+    cap = img if capture is None else (capture / 255.0 if capture.dtype == np.uint8 else capture)
+    w, q = filters(lay, cap)
+    noise = noise_map(cap, lay.bands)[lay.chips]
+    chips = flat(bands.analyse(img), lay.bands)[lay.chips]
+    if not weighted:
+        q, noise = w, np.ones_like(noise)
+    elif combine:
+        q, noise = band_weights(lay, chips, w, q, noise)
+    return np.einsum("nk,nk->n", chips, q), np.einsum("nk,nk->n", q * q, noise)
+
+
+def _chip_bands(lay: PrintLayout) -> np.ndarray:
+    """(N, K) int: the index in `lay.bands` of every chip's band."""
+    n = formats.SNAPSHOT_SIZE
+    edges = np.cumsum([int(np.prod(bands.band_shape(b, n))) for b in lay.bands])
+    return np.searchsorted(edges, lay.chips, side="right")
+
+
+def _per_band(band: np.ndarray, x: np.ndarray, nb: int) -> np.ndarray:
+    """x (N, K) at chips whose bands are `band` (N, K) -> (N, nb) the sums of x over each band's chips."""
+    idx = (np.arange(len(x))[:, None] * nb + band).ravel()
+    return np.bincount(idx, weights=x.ravel(), minlength=len(x) * nb).reshape(len(x), nb)
+
+
+def _band_fit(read: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per band, the least-squares gain (nb,) of partial readings (n, nb) on their reference (n, nb), and
+    the residuals (n, nb)."""
+    gain = np.einsum("nb,nb->b", read, ref) / np.maximum(np.einsum("nb,nb->b", ref, ref), 1e-30)
+    return gain, read - gain * ref
+
+
+def band_response(capture: np.ndarray, snapshot: np.ndarray, lay: PrintLayout) -> tuple[np.ndarray, np.ndarray]:
+    """What a capture kept of each band of `lay` (bench): the gain (nb,) of every carrier's partial reading
+    in that band against the digital snapshot's, and the noise power left (nb,) relative to the print noise
+    model (`band_noise`). Both (380, 380, 3) uint8 RGB. gain^2 / noise is what a unit of payload energy in
+    that band is worth to the combining receiver."""
+    cap = capture / 255.0
+    w, q = filters(lay, cap)
+    band, nb = _chip_bands(lay), len(lay.bands)
+    read = _per_band(band, flat(bands.analyse(cap), lay.bands)[lay.chips] * q, nb)
+    sent = _per_band(band, flat(bands.analyse(snapshot / 255.0), lay.bands)[lay.chips] * q, nb)
+    var = _per_band(band, q * q * noise_map(cap, lay.bands)[lay.chips], nb)
+    gain, resid = _band_fit(read, sent)
+    return gain, np.sum(resid ** 2, axis=0) / np.maximum(var.sum(0), 1e-30)
+
+
+def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarray,
+                 noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Combining the bands as this capture kept them: a print keeps its bands unequally (blur takes the
+    finest luma, a JPEG the chroma, the host's texture stays in the luma of 4-pixel cells), so each
+    carrier's reading becomes a weighted sum of its per-band partial readings, with the weights that
+    give the pilots' value the least noise: the pilots' per-band gains g and the covariance S of their
+    per-band residuals give weights S^-1 g (the minimum-variance combiner; S is not diagonal, because
+    the embedder cancelled the host's projection on the whole carrier, not on each band). chips (N, K):
+    the image's coefficients under the carriers; w, q (N, K): the carriers and their matched filters;
+    noise (N, K): the chips' modelled relative noise powers (returned as they are). Returns the filters
+    (N, K), scaled so that each carrier's expected reading stays its value times the pilots' overall
+    gain; the designed filters q when the pilots read no better through the combined ones."""
+    band = _chip_bands(lay)
+    nb, p = len(lay.bands), slice(0, PILOTS)
+
+    def per_band(x):   # (PILOTS, K) -> (PILOTS, nb) sums of x over each band's chips
+        return _per_band(band[p], x, nb)
+
+    shape = per_band(q[p] * w[p]) * (lay.pilot_amp * lay.pilot_signs)[:, None]   # a pilot's value per band
+    read = per_band(q[p] * chips[p])
+    gain, resid = _band_fit(read, shape)
+    cov = resid.T @ resid / PILOTS
+    cov += np.eye(nb) * 1e-3 * np.trace(cov) / nb          # a little shrinkage: 256 pilots, nb x nb
+    beta = np.linalg.solve(cov, gain * np.abs(shape).mean(0))
+    share = _per_band(band, q * w, nb)   # each carrier's designed response per band
+    resp = share @ (beta * gain)
+    if 2 * np.count_nonzero(resp > 0) <= len(resp):   # most carriers would read with the wrong sign
+        return q, noise
+    keep = (share @ gain) / np.where(resp > 1e-30, resp, 1e-30)
+    combined = q * beta[band] * keep[:, None]
+    signs = lay.pilot_signs
+
+    def pilot_snr(f):   # the pilots' SNR through filters f (scale-free: normalised first, as the float32 graph must)
+        x = np.einsum("nk,nk->n", chips[p], f[p]) * signs
+        x = x / max(float(np.abs(x).max()), 1e-30)
+        return float(np.mean(x)) ** 2 / max(float(np.var(x)), 1e-30)
+
+    return (combined, noise) if pilot_snr(combined) > pilot_snr(q) else (q, noise)
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What the pilots say about one capture: the channel's gain and its noise power per carrier, and the
+    planes' expected RMS error that follows (no ground truth needed)."""
+
+    gain: float
+    noise: float
+    plane_rmse: float
+
+
+def restore(read: np.ndarray, factor: np.ndarray, res: int, channels: int,
+            strength: float = 1.0, codec: str = formats.PRINT_CODEC) -> tuple[np.ndarray, Reading]:
+    """Carrier readings (N,) and their relative noise powers (N,) (`despread` with the same `codec`) ->
+    planes (3, C, R, R) float32 (the MMSE estimate, not clipped; the posterior mean for folded
+    coefficients) and the pilots' `Reading` (gain; noise per carrier of average noise factor)."""
+    return restore_layout(print_layout(res, channels, codec), read, factor, strength)
+
+
+def restore_layout(lay: PrintLayout, read: np.ndarray, factor: np.ndarray,
+                   strength: float = 1.0) -> tuple[np.ndarray, Reading]:
+    """`restore` with any layout (`make_layout`)."""
+    res, channels = lay.res, lay.channels
+    pilots = read[:PILOTS] * lay.pilot_signs / strength
+    gain = max(float(np.mean(pilots)) / lay.pilot_amp, 1e-3)
+    unit = max(float(np.mean((pilots - gain * lay.pilot_amp) ** 2 / factor[:PILOTS])), 1e-14)
+    noise = unit * factor[PILOTS:] / strength ** 2   # per carrier, in units of strength 1
+    m, f = len(lay.coef), len(lay.folded)
+    a, y, n = lay.scale * gain, read[PILOTS:] / strength, noise[:m]
+    est = a * lay.prior / (a * a * lay.prior + n) * y[:m]
+    err = lay.prior * n / (a * a * lay.prior + n)
+    if f:   # the folded coefficients: the posterior mean from their linear and helix readings
+        k, sd = lay.folded, np.sqrt(lay.prior[lay.folded])
+        x, var = print_fold.unfold(y[k], a[k] * sd, n[k], y[m:m + f], y[m + f:], gain * lay.fold_amp,
+                                   noise[m:m + f], noise[m + f:])
+        est[k], err[k] = x * sd, var * lay.prior[k]
+    coef = np.zeros(3 * channels * res * res)
+    coef[lay.coef] = est
+    missing = np.ones(coef.size, bool)
+    missing[lay.coef] = False
+    total_err = err.sum() + np.tile(prior_spectrum(res).ravel(), 3 * channels)[missing].sum()
+    rmse = float(np.sqrt(total_err / coef.size))
+    planes = plane_idct(coef, (3, channels, res, res)).astype(np.float32)
+    return planes, Reading(gain, float(unit * np.mean(factor)), rmse)

@@ -1,0 +1,36 @@
+"""Every committed benchmark result records the run that wrote it (bench/README.md, "Methodology"): its
+date, commit, core count and library versions, so that a figure can be traced to the machine that made it."""
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+RESULTS = Path(__file__).resolve().parents[1] / "bench" / "results"
+FILES = sorted(RESULTS.glob("*.json"))
+
+
+def test_there_are_results():
+    assert len(FILES) >= 15, [p.name for p in FILES]
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
+def test_results_record_their_run(path):
+    meta = json.loads(path.read_text()).get("meta")
+    assert isinstance(meta, dict), f"{path.name} has no 'meta' entry"
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", meta.get("date", "")), meta.get("date")
+    assert re.fullmatch(r"[0-9a-f]{7,40}(\+dirty)?|unknown", meta.get("commit", "")), meta.get("commit")
+    backfilled = bool(meta.get("backfilled"))  # written before runs recorded it: the file's last commit
+    assert isinstance(meta.get("cores"), int) and meta["cores"] >= 1 or backfilled and meta.get("cores") == \
+        "not recorded", meta.get("cores")
+    versions = meta.get("versions")
+    assert versions == "not recorded" and backfilled or \
+        isinstance(versions, dict) and {"python", "numpy", "opencv", "onnxruntime"} <= set(versions), versions
+
+
+def test_run_metadata_has_every_field():
+    from snapshot3d.bench.common import run_metadata
+
+    meta = run_metadata()
+    assert {"date", "commit", "cores", "versions"} <= set(meta)
+    assert {"python", "numpy", "opencv", "onnxruntime"} <= set(meta["versions"])
