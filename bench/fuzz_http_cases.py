@@ -23,6 +23,20 @@ def _get(live, target):
         return None
 
 
+def _at_once(job, n: int, join_s: float) -> None:
+    """job(0) .. job(n - 1) on n threads at once; a job that fails with OSError leaves its answer None."""
+    def guarded(i):
+        try:
+            job(i)
+        except OSError:
+            pass
+    threads = [threading.Thread(target=guarded, args=(i,)) for i in range(n)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(join_s)
+
+
 def http_campaign(live, seeds, file_inputs, rng, scale: float, record) -> None:
     """`record(cls, outcome, detail)` for every request."""
     body, headers = multipart("spot.png", seeds.snap_png)
@@ -137,15 +151,8 @@ def http_campaign(live, seeds, file_inputs, rng, scale: float, record) -> None:
     answers = [None] * len(slow)
 
     def one(i):
-        try:
-            answers[i] = live.raw(slow[i], timeout=15)
-        except OSError:
-            answers[i] = None
-    threads = [threading.Thread(target=one, args=(i,)) for i in range(len(slow))]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(30)
+        answers[i] = live.raw(slow[i], timeout=15)
+    _at_once(one, len(slow), 30)
     for a in answers:
         record("slow_body", *http_outcome(a))
 
@@ -153,14 +160,7 @@ def http_campaign(live, seeds, file_inputs, rng, scale: float, record) -> None:
 
     def upload(i):
         b, h = multipart("spot.png", seeds.snap_png)
-        try:
-            results[i] = live.request("POST", "/v1/decode", b, h, timeout=120)
-        except OSError:
-            results[i] = None
-    threads = [threading.Thread(target=upload, args=(i,)) for i in range(len(results))]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(180)
+        results[i] = live.request("POST", "/v1/decode", b, h, timeout=120)
+    _at_once(upload, len(results), 180)
     for a in results:
         record("overload", *http_outcome(a))
