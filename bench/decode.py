@@ -161,6 +161,16 @@ def _graph_agreement(rows: list[dict]) -> dict:
 def bench_decode_command(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if getattr(args, "profile", False):
+        from .decode_profile import profile_decode
+
+        doc = profile_decode(out, args.repeats)
+        shares = ", ".join(f"{s} {doc['stages_ms_median'][s]:.0f} ms ({doc['stages_share'][s]:.0%})"
+                           for s in doc["stages_share"])
+        print(f"decode of {doc['photo']}: {doc['decode_ms_median']:.0f} ms median over {doc['repeats']} "
+              f"({shares}); first view {doc['first_view_ms_median']:.0f} ms; wrote {out / 'decode_profile.json'} "
+              f"and decode_profile.txt")
+        return 0
     scene = load_scene_file(args.scene)
     sheet = render_sheet(_snapshot(scene, formats.PRINT_CODEC, load_host("builtin:" + args.host)),
                          scene_meta(scene, formats.PRINT_CODEC), 2)

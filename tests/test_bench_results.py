@@ -34,3 +34,14 @@ def test_run_metadata_has_every_field():
     meta = run_metadata()
     assert {"date", "commit", "cores", "versions"} <= set(meta)
     assert {"python", "numpy", "opencv", "onnxruntime"} <= set(meta["versions"])
+
+
+def test_decode_profile_writes_stage_shares(tmp_path):
+    """`bench decode --profile`: each stage's median and share of the decode, and cProfile's listing."""
+    from snapshot3d.bench.decode_profile import STAGES, profile_decode
+
+    doc = profile_decode(tmp_path, repeats=1, top=5)
+    assert set(doc["stages_share"]) == set(STAGES) and 0.8 <= sum(doc["stages_share"].values()) <= 1.0
+    assert doc["decode_ms_median"] > 0 and 0 < doc["first_view_ms_median"] <= doc["decode_ms_median"]
+    assert len(doc["top_by_tottime"]) == 5 and json.loads((tmp_path / "decode_profile.json").read_text())["meta"]
+    assert "cumulative" in (tmp_path / "decode_profile.txt").read_text()

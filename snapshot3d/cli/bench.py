@@ -223,5 +223,8 @@ def add_commands(sub) -> None:
                                                                "quality estimate's lines")
     bd.add_argument("--calibration-dir", default=None,
                     help="where to write the lines (default: the package's assets, which decode reads)")
+    bd.add_argument("--profile", action="store_true",
+                    help="only profile the decode of the example photo: each stage's median time and share over "
+                         "--repeats decodes, and cProfile's top functions (decode_profile.{json,txt})")
     _quick(bd, seeds=2, repeats=1, calib_seeds=1, calib_scenes="bench/models/spot-print.s3d",
            calibration_dir="bench/results/quick")
