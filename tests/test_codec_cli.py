@@ -114,3 +114,17 @@ def test_embed_bad_host_and_output(tmp_path):
     assert_one_line_error(run("embed", str(SPOT), "--medium", "file", "-o", str(tmp_path / "s.png"), "--host-psnr",
                               "55"), "the file codec keeps at most")
     assert not (tmp_path / "s.png").exists()
+
+
+def test_embed_hints_at_the_budget_for_planes_a_print_cannot_carry():
+    """Plain `fit` writes 64x8 planes; a print of them restores ~6 dB worse than the budget's 16x4 (the codec
+    curve), so `embed` says in one line what to run instead; a budgeted scene and the file medium get no hint."""
+    from snapshot3d.paths import asset
+    from snapshot3d.scene import load_scene_file
+    from snapshot3d.train.codec.commands import payload_hint
+
+    big, small = load_scene_file(asset("spot.s3d")), load_scene_file(asset("spot-print.s3d"))
+    hint = payload_hint("print", big)
+    assert (big.resolution, big.channels) == (64, 8) and hint.startswith("hint: 64x8 planes") and "\n" not in hint
+    assert "--budget auto --medium print" in hint
+    assert payload_hint("print", small) is None and payload_hint("file", big) is None

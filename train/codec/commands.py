@@ -16,11 +16,11 @@ from snapshot3d.options import config_from_args
 from snapshot3d.reports import write_json
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import scene_meta
-from snapshot3d.scene import load_scene_file
+from snapshot3d.scene import Scene, load_scene_file
 
 from .embedding import STRENGTHS, check_planes_for, snapshot_for, strength_for
 
-__all__ = ["embed_command", "train_codec_command", "train_print_codec_command", "HOST_PSNRS"]
+__all__ = ["embed_command", "train_codec_command", "train_print_codec_command", "payload_hint", "HOST_PSNRS"]
 
 HOST_PSNRS = (20.0, 60.0)
 """the host fidelities, in dB, `embed --host-psnr` takes"""
@@ -62,7 +62,30 @@ def embed_command(args) -> int:
     print(f"wrote {args.output}: {args.medium} medium (codec {codec}), host_psnr {report['host_psnr']:.2f} dB, "
           f"host_ssim {report['host_ssim']:.4f}, strength {strength:g}, {scene.scene_kb:.1f} kB of planes hidden, "
           f"{secs:.1f} s")
+    if (hint := payload_hint(args.medium, scene)) is not None:
+        print(hint)
     return 0
+
+
+def payload_hint(medium: str, scene: Scene, margin_db: float = 3.0) -> str | None:
+    """One line for a print snapshot of planes too large for a photo to carry: the print codec's curve
+    (`snapshot3d/assets/budget-curves.json`, `moderate` photos) puts their restore more than `margin_db` below
+    its best payload, more than a larger field can win back (plain `fit` writes 64x8: 21.9 dB against 27.9 at
+    16x4). None otherwise, and for the file medium, whose curve is flat within 1.5 dB."""
+    from snapshot3d.paths import asset
+    from snapshot3d.train.field.budget import CURVES_FILE, codec_psnr
+
+    path = asset(CURVES_FILE)
+    points = json.loads(path.read_text()).get(medium, {}).get("points", []) if path.is_file() else []
+    if medium != "print" or not points:
+        return None
+    here = codec_psnr(medium, int(scene.codes.size))
+    best_values, best_db = max(points, key=lambda p: p[1])
+    if here >= best_db - margin_db:
+        return None
+    return (f"hint: {scene.resolution}x{scene.channels} planes are more than a print carries well (about {here:.1f} "
+            f"dB restored from a moderate photo, against {best_db:.1f} at {best_values} plane values); fit with "
+            f"'--budget auto --medium print' for the plane size with the best views after printing")
 
 
 def _finish_training(out: Path, summary: dict, t0: float) -> None:
