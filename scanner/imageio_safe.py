@@ -42,7 +42,8 @@ def image_size(path, what: str = "photo") -> tuple[int, int, str]:
     if path.is_dir():
         raise UserError(f"{path} is a folder; give the {what} file itself")
     if not path.is_file():
-        raise UserError(f"{what} not found: {path}")
+        raise UserError(f"{path} is not a regular file (a device, a pipe or a socket); give the {what} file itself"
+                        if path.exists() else f"{what} not found: {path}")
     if path.stat().st_size > MAX_BYTES:
         raise UserError(f"{path.name} is too large ({path.stat().st_size / 1e6:.0f} MB; limit {MAX_BYTES / 1e6:.0f} MB)")
     if path.stat().st_size == 0:

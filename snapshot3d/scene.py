@@ -111,7 +111,8 @@ def load_scene_file(path, expect_decoder: str | None = formats.DECODER_VERSION) 
     is allocated (`validate.SCENE_MAX_BYTES`, `validate.SCENE_MAX_RES`, `formats.C_MAX`)."""
     path = Path(path)
     if not path.is_file():
-        raise UserError(f"scene file not found: {path}")
+        raise UserError(f"{path} is not a regular file; give the scene file itself" if path.exists()
+                        else f"scene file not found: {path}")
     size = path.stat().st_size
     if size > validate.SCENE_MAX_BYTES:
         raise UserError(f"{path}: {size / 1e6:.1f} MB is larger than any scene file (limit "

@@ -304,3 +304,16 @@ def test_outputs_to_unwritable_paths_are_one_line_errors(tmp_path):
         with pytest.raises(UserError, match="cannot write"):
             write_atomic(bad, b"{}")
     assert sorted(p.name for p in (tmp_path / "new").iterdir()) == ["dir"]
+
+
+def test_a_device_or_a_pipe_is_refused_in_one_line_without_reading_it(tmp_path):
+    """/dev/zero would never end; a named pipe would block: both are refused from their type."""
+    import os
+
+    fifo = tmp_path / "photo.jpg"
+    os.mkfifo(fifo)
+    for cmd in (["decode", "/dev/zero", "-o", str(tmp_path / "o")], ["decode", str(fifo), "-o", str(tmp_path / "o")],
+                ["render", "/dev/zero", "-o", str(tmp_path / "r")]):
+        proc = run_cli(*cmd, timeout=60)
+        assert proc.returncode == 1 and proc.stderr.count("\n") == 1 and "not a regular file" in proc.stderr, proc.stderr
+    assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
