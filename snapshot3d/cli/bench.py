@@ -128,6 +128,24 @@ def add_commands(sub) -> None:
     _quick(bb, scenes="bench/models/spot-print.s3d", hosts="chelsea", heldout=0, seeds=1, severities="moderate",
            pools="print-1,chroma-4px")
 
+    bf = add(bsub, "fit-channel", "a fit's last phase through the print channel's model or through the 8-bit "
+                                  "rounding only (paired, one shared prefix): field_psnr, and e2e_psnr through "
+                                  "simulated prints", _run("snapshot3d.bench.fit_channel", "bench_fit_channel_command"))
+    _out(bf)
+    bf.add_argument("--scene", default="builtin:spot", help="builtin scene to fit")
+    bf.add_argument("--plane-res", type=int, default=16, help="R of the planes (the print budget's choice for spot)")
+    bf.add_argument("--plane-channels", type=int, default=4, help="C of the planes")
+    bf.add_argument("--steps", type=int, default=1500, help="fit steps")
+    bf.add_argument("--seed", type=int, default=0, help="fit seed")
+    bf.add_argument("--size", type=int, default=200, help="view size of the scene's images")
+    bf.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos")
+    bf.add_argument("--severities", default="moderate,mild", help="comma-separated physical severities")
+    bf.add_argument("--seeds", type=int, default=6, help="simulated photos per severity and host")
+    bf.add_argument("--views", type=int, default=10, help="held-out ground-truth views per e2e_psnr")
+    bf.add_argument("--threads", type=int, default=2, help="torch threads of the fit, and photo worker processes")
+    bf.add_argument("--cache", default=None, help="file caching the shared prefix of the fit (reused when present)")
+    _quick(bf, steps=20, hosts="coffee", severities="moderate", seeds=1, views=2)
+
     bc = add(bsub, "codec", "a medium's codec: host fidelity vs restore_psnr through simulate+scan; baselines; "
                             "charts (codec.* for the file medium, codec_print.* for the print medium)",
              _run("snapshot3d.bench.codec", "bench_codec_command"))

@@ -28,32 +28,13 @@ from snapshot3d.posed import PosedImages
 from snapshot3d.scene import dequantize_planes
 
 from .config import LADDER, LADDER_PRINT, FitConfig
+from .curves import CURVES_FILE, PREDICT_HOSTS, print_channel
+from .curves import codec_curves as _curves
 from .evaluate import evaluate_planes
 from .fit import fit, hull_grid
 
 __all__ = ["fit_ladder", "choose_rung", "codec_psnr", "expected_e2e", "codec_share", "ladder_for", "print_channel",
            "predicted_e2e", "CURVES_FILE", "PREDICT_HOSTS"]
-
-CURVES_FILE = "budget-curves.json"
-PREDICT_HOSTS = ("builtin:coffee", "builtin:chelsea")
-
-
-def _curves() -> tuple[dict, object]:
-    import json
-
-    from snapshot3d.paths import asset
-
-    path = asset(CURVES_FILE)
-    return (json.loads(path.read_text()) if path.is_file() else {}), path
-
-
-def print_channel():
-    """The print channel's model (`print_channel.ChannelModel`) from budget-curves.json, or None."""
-    from snapshot3d.codecs.print_channel import ChannelModel
-
-    ch = _curves()[0].get("print", {}).get("channel")
-    return ChannelModel(float(ch["gain"]), float(ch["unit"])) if ch else None
-
 
 def predicted_e2e(planes: np.ndarray, decoder, posed: PosedImages, channel, hosts=PREDICT_HOSTS, seed: int = 0) -> float:
     """The e2e_psnr (held-out views) expected of planes (3, C, R, R) printed and captured: the median over

@@ -28,6 +28,12 @@ class FitConfig:
     occupancy: bool = config_field(True, "occupancy-based empty-space skipping (off: every sample in the box is evaluated)")
     min_transmittance: float = config_field(1e-3, "early ray termination: samples behind this transmittance are dropped (0: off)")
     qat_fraction: float = config_field(0.15, "last fraction of steps trained through the 8-bit rounding the snapshot carries")
+    channel_fraction: float = config_field(0.0, "last fraction of steps trained through a model of the print channel "
+                                           "(per-DCT-coefficient gain and noise, train/field/channel_fit.py; 0: off)")
+    channel_noise: float = config_field(1.0, "scale of the print channel model's noise in that phase (1: as measured "
+                                        "at the design severity)")
+    channel_gain: bool = config_field(False, "in that phase, also the model's per-coefficient gain (the receiver's "
+                                      "shrinkage); off: its noise alone, which measured better (bench fit-channel)")
     fg_fraction: float = config_field(0.75, "share of each batch drawn from rays that see the object (when masks exist)")
     tv_weight: float = config_field(1e-4, "total-variation weight on the planes")
     empty_weight: float = config_field(1.0, "weight of the density penalty at random points outside the visual hull")
@@ -60,8 +66,10 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
         problems.append("--steps, --batch-rays, --occ-every and --checkpoint-every must be >= 1")
     if not (cfg.lr > 0 and cfg.lr_final > 0):
         problems.append("--lr and --lr-final must be > 0")
-    if not (0 <= cfg.qat_fraction <= 1 and 0 <= cfg.fg_fraction <= 1 and 0 <= cfg.min_transmittance < 1):
-        problems.append("--qat-fraction and --fg-fraction must be in [0, 1], --min-transmittance in [0, 1)")
+    if not (0 <= cfg.qat_fraction <= 1 and 0 <= cfg.channel_fraction <= 1 and 0 <= cfg.fg_fraction <= 1
+            and 0 <= cfg.min_transmittance < 1 and cfg.channel_noise >= 0):
+        problems.append("--qat-fraction, --channel-fraction and --fg-fraction must be in [0, 1], "
+                        "--min-transmittance in [0, 1), --channel-noise >= 0")
     if problems:
         raise UserError("; ".join(problems))
     return cfg

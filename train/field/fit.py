@@ -19,6 +19,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.posed import PosedImages
 from snapshot3d.scene import quantize_planes
 
+from .channel_fit import through_channel
 from .config import FitConfig, check_fit_config
 from .field import TriPlanes, decode, sample_planes, straight_through_8bit
 from .occupancy import OccupancyGrid
@@ -42,6 +43,8 @@ class FitState:
     samples: int = 0
     rays: int = 0
     train_seconds: float = 0.0
+    channel: tuple | None = None
+    """(D, a, s) of `channel_fit.response_tensors` when cfg.channel_fraction > 0"""
 
 
 @dataclass
@@ -71,7 +74,21 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
     planes.to(device)
     occ = OccupancyGrid(hull=hull if hull is not None else hull_grid(posed)).to(device)
     opt = torch.optim.Adam(planes.parameters(), lr=cfg.lr)
-    return FitState(planes, occ, frame, make_rays(posed, posed.train, frame).to(device), opt)
+    return FitState(planes, occ, frame, make_rays(posed, posed.train, frame).to(device), opt,
+                    channel=new_state_channel(cfg, device))
+
+
+def new_state_channel(cfg: FitConfig, device=None) -> tuple | None:
+    """`FitState.channel` of `cfg`: (D, gain, noise) of the print channel's stand-in, (R, R) each (gain all
+    ones unless cfg.channel_gain), or None when cfg.channel_fraction is 0."""
+    if cfg.channel_fraction <= 0:
+        return None
+    from .channel_fit import response_tensors
+    channel = response_tensors(cfg.plane_res, cfg.plane_channels, device)
+    if channel is None:
+        raise UserError("--channel-fraction needs the print channel's model in budget-curves.json; "
+                        "run 'snapshot3d bench print-predict'")
+    return channel if cfg.channel_gain else (channel[0], torch.ones_like(channel[1]), channel[2])
 
 
 def _tv(p: torch.Tensor) -> torch.Tensor:
@@ -102,7 +119,10 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
         g["lr"] = lr_at(cfg, st.step)
     o, d, target = st.bank.batch(cfg.batch_rays, cfg.fg_fraction, gen)
     planes = st.planes.planes
-    if st.step >= cfg.steps * (1 - cfg.qat_fraction):
+    if st.channel is not None and st.step >= cfg.steps * (1 - cfg.channel_fraction):
+        dct, gain, noise = st.channel   # what a print restores
+        planes = straight_through_8bit(through_channel(planes, dct, gain, cfg.channel_noise * noise, gen))
+    elif st.step >= cfg.steps * (1 - cfg.qat_fraction):
         planes = straight_through_8bit(planes)
     if channels is not None and channels < planes.shape[1]:
         planes = planes[:, :channels]

@@ -1,0 +1,81 @@
+"""A differentiable stand-in for what the print codec does to a scene's planes, for the last phase of a fit
+(`FitConfig.channel_fraction`; `fit --medium print`).
+
+Per DCT coefficient k of a plane channel (the print codec's source coding: `print_source.plane_dct`), a
+print and its capture restore `a_k * x_k + s_k * n` with n ~ N(0, 1): `a_k` the receiver's MMSE shrinkage,
+`s_k` the rest of its error. Both are measured once per plane size (`channel_response`, numpy) by
+regression over simulations of the channel's model (`print_channel.predicted_planes`, the model that
+`fit --budget auto --medium print` predicts with) on planes drawn from the codec's prior spectrum, in
+the bundled hosts `curves.PREDICT_HOSTS`. `through_channel` applies them in torch (the DCT as a matrix
+product). The fit uses the noise alone unless `FitConfig.channel_gain`: with the gain, the fit boosts the
+shrunk frequencies and lost 0.2 dB of e2e_psnr at `moderate` (spot 16x4, `bench fit-channel`).
+
+Layouts: planes (3, C, R, R) float in [-1, 1]; responses (R, R) float32, index [v, u] as `plane_dct`.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import torch
+
+__all__ = ["channel_response", "dct_matrix", "through_channel", "response_tensors"]
+
+
+def channel_response(res: int, channels: int, channel, hosts, draws: int = 4, seed: int = 0):
+    """(a, s), each (res, res) float32: per DCT coefficient, the least-squares gain of the restored
+    coefficient on the sent one and the RMS of what is left, over `draws` random plane sets per host
+    (host specs as `load_host` takes them), pooled over the 3 * channels plane channels."""
+    from snapshot3d.codecs.print_channel import predicted_planes
+    from snapshot3d.codecs.print_source import plane_dct, random_planes
+    from snapshot3d.scanner.backgrounds import load_host
+
+    rng = np.random.default_rng(seed)
+    xs, ys = [], []
+    for h in hosts:
+        host = load_host(h)
+        for _ in range(draws):
+            x = random_planes(res, channels, rng)
+            y = predicted_planes(host, x, channel, rng)
+            xs.append(plane_dct(x).reshape(-1, res, res))
+            ys.append(plane_dct(y).reshape(-1, res, res))
+    x, y = np.concatenate(xs), np.concatenate(ys)                # (n, R, R)
+    a = (x * y).sum(0) / np.maximum((x * x).sum(0), 1e-12)
+    s = np.sqrt(np.mean((y - a * x) ** 2, axis=0))
+    return a.astype(np.float32), s.astype(np.float32)
+
+
+@lru_cache(maxsize=8)
+def _cached_response(res: int, channels: int) -> tuple[np.ndarray, np.ndarray] | None:
+    from .curves import PREDICT_HOSTS, print_channel
+
+    channel = print_channel()
+    return None if channel is None else channel_response(res, channels, channel, PREDICT_HOSTS)
+
+
+def response_tensors(res: int, channels: int, device=None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+    """(D, a, s) on `device` for planes of (res, channels), the print channel's model as measured
+    (budget-curves.json; None without one): D the (R, R) orthonormal DCT matrix, a and s (R, R)."""
+    resp = _cached_response(res, channels)
+    if resp is None:
+        return None
+    return tuple(t.to(device) for t in (dct_matrix(res), torch.from_numpy(resp[0]), torch.from_numpy(resp[1])))
+
+
+def dct_matrix(res: int) -> torch.Tensor:
+    """(R, R) float32 orthonormal DCT-II matrix D: cv2.dct(X) == D @ X @ D.T."""
+    k = np.arange(res)[:, None]
+    n = np.arange(res)[None, :]
+    d = np.sqrt(2.0 / res) * np.cos(np.pi * (2 * n + 1) * k / (2 * res))
+    d[0] /= np.sqrt(2.0)
+    return torch.from_numpy(d.astype(np.float32))
+
+
+def through_channel(planes: torch.Tensor, d: torch.Tensor, a: torch.Tensor, s: torch.Tensor,
+                    gen: torch.Generator | None = None) -> torch.Tensor:
+    """planes (3, C, R, R) -> one draw of what the print restores of them (same shape; differentiable in
+    `planes`): each channel's DCT coefficients scaled by `a` plus Gaussian noise of std `s` (the noise drawn
+    on the CPU from `gen`)."""
+    coef = d @ planes @ d.T
+    noise = torch.randn(planes.shape, generator=gen).to(planes.device)
+    return d.T @ (a * coef + s * noise) @ d
