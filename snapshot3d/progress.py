@@ -37,6 +37,10 @@ class LogLines:
 
     def update(self, n: int = 1) -> None:
         self.n += n
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Write a line if the work has reached the next `step` (also after `n` was set directly, as tqdm allows)."""
         now, share = self.clock(), min(self.n / self.total, 1.0)
         if share < self.next_share or now - self.t0 < self.quiet_s or (now - self.last < self.every_s and share < 1):
             return
@@ -47,7 +51,7 @@ class LogLines:
         print(f"{self.desc}: {share:.0%} ({self.n}/{self.total} {self.unit}), {_clock(spent)}{left}{extra}",
               file=self.stream, flush=True)
 
-    def set_postfix_str(self, s: str) -> None:
+    def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
         self.postfix = s
 
     def close(self) -> None:

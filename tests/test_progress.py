@@ -43,3 +43,19 @@ def test_off_a_terminal_progress_writes_log_lines_not_a_bar():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={"PATH": ""})
     assert proc.stdout.strip() == "LogLines" and proc.stderr == ""
     assert type(progress(5, "x")).__name__ in ("LogLines", "tqdm")
+
+
+def test_n_set_directly_then_refresh_as_the_fit_does():
+    """train/field/commands.py sets `bar.n = step`, `set_postfix_str(..., refresh=False)`, `refresh()` (tqdm's API)."""
+    clock, out = Clock(), io.StringIO()
+    bar = LogLines(100, "fit", stream=out, clock=clock)
+    for step in range(25, 101, 25):
+        clock.t += 20.0
+        bar.n = step
+        bar.set_postfix_str(f"psnr {step / 4:.2f} dB", refresh=False)
+        bar.refresh()
+    assert out.getvalue().splitlines() == [
+        "fit: 25% (25/100 step), 0m20s, about 1m00s left, psnr 6.25 dB",
+        "fit: 50% (50/100 step), 0m40s, about 0m40s left, psnr 12.50 dB",
+        "fit: 75% (75/100 step), 1m00s, about 0m20s left, psnr 18.75 dB",
+        "fit: 100% (100/100 step), 1m20s, psnr 25.00 dB"]
