@@ -121,9 +121,10 @@ def read_image_bgr(path, what: str = "photo") -> np.ndarray:
 
 
 @lru_cache(maxsize=1)
+@lru_cache(maxsize=None)
 def _quiet_libraries() -> None:
     """OpenCV's own log at errors only, Pillow's `logging` messages off (on a damaged file they would
-    print beside the one-line error)."""
+    print beside the one-line error); once per process."""
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
     logging.getLogger("PIL").setLevel(logging.CRITICAL)   # it logs a damaged TIFF at ERROR, then raises
 
