@@ -85,7 +85,7 @@ def bench_codec_jpeg_command(args) -> int:
         return 0
     scene = load_scene_file(asset("spot.s3d"))
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, SIZE)
-    models = field_models()
+    models = field_models(decoder=scene.decoder_version)
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, SIZE, SIZE)
     rows = []
     runs = [("shipped", None, 0), *([(f"shipped, refined {args.refine}", None, args.refine)] if args.refine else []),

@@ -92,7 +92,7 @@ class E2E:
             {"downscale": scene.meta.get("downscale", 4)}
         self.posed = load_scene(src, **kw)
         self.views = self.posed.test[np.linspace(0, len(self.posed.test) - 1, views).round().astype(int)]
-        self.decoder = load_decoder()
+        self.decoder = load_decoder(scene.decoder_version)
 
     def psnr(self, planes: np.ndarray) -> float:
         from snapshot3d.train.field.evaluate import evaluate_planes

@@ -157,7 +157,7 @@ class ViewJudge:
         from snapshot3d.cameras import orbit_cameras
         from snapshot3d.train.field.decoder import load_decoder
 
-        self.scene, self.size, self.decoder = scene, size, load_decoder()
+        self.scene, self.size, self.decoder = scene, size, load_decoder(scene.decoder_version)
         self.cams = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
         self.ref = self.views(scene.planes())
 

@@ -58,7 +58,7 @@ CHECK_HOSTS = ("builtin:coffee", "builtin:chelsea")          # and is scored on 
 
 def _reference(scene, size: int) -> np.ndarray:
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
-    return render_views(field_models(), scene.planes(), scene.box, c2w, intr, size, size)
+    return render_views(field_models(decoder=scene.decoder_version), scene.planes(), scene.box, c2w, intr, size, size)
 
 
 def _ground_truth(scene, size: int) -> np.ndarray:

@@ -11,6 +11,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from snapshot3d import formats
 from snapshot3d.errors import UserError
 from snapshot3d.paths import asset
 
@@ -18,7 +19,7 @@ __all__ = ["export_command"]
 
 
 def export_command(args) -> int:
-    from .onnx_export import export_all, restore_keys
+    from .onnx_export import decoder_keys, export_all, restore_keys
     from .parity import field_parity, print_graph_agrees, print_parity, restore_parity
 
     out = asset() if args.install else Path(args.output)
@@ -29,12 +30,13 @@ def export_command(args) -> int:
     try:
         models = export_all(stage)
         paths = {k: v["path"] for k, v in models.items()}
-        parity = {"field": field_parity(paths["project"], paths["field"])}
-        parity.update({k: restore_parity(paths[k], paths["project"], paths["field"], codec=c)
-                       for k, c in restore_keys().items()})
-        parity["restore-print"] = print_parity(paths["restore-print"], paths["project"], paths["field"])
+        parity = {("field" if d == formats.DECODER_VERSION else f"field-{d}"):
+                  field_parity(paths[k], paths[k.replace("project", "field", 1)], decoder=d)
+                  for k, (g, d) in decoder_keys().items() if g == "project"}
+        parity.update({k: restore_parity(paths[k], codec=c) for k, c in restore_keys().items()})
+        parity["restore-print"] = print_parity(paths["restore-print"])
         print(json.dumps(parity))
-        if parity["field"]["views_max_abs_diff"] > 1e-3 or \
+        if any(parity[k]["views_max_abs_diff"] > 1e-3 for k in parity if k.startswith("field")) or \
                 any(parity[k]["restore_psnr_diff_db"] > 0.05 for k in restore_keys()) or \
                 any(not print_graph_agrees(v) for v in parity["restore-print"].values()):
             raise UserError("ONNX parity check failed: the exported models do not match torch (or the print receiver's "

@@ -59,5 +59,5 @@ class FieldGraph(nn.Module):
 
     def forward(self, tables: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
         h = self.decoder.l0.bias + tables[0][rows[:, 0]] + tables[1][rows[:, 1]] + tables[2][rows[:, 2]]
-        out = self.decoder.l2(F.relu(self.decoder.l1(F.relu(h))))
+        out = self.decoder.tail(F.relu(h))
         return torch.clamp(out[:, 0], max=formats.DENSITY_CLAMP), torch.sigmoid(out[:, 1:4])

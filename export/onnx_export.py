@@ -46,23 +46,26 @@ DOCS = {
                      "float32 (3,): the pilots' gain, noise per carrier and the planes' expected RMS error.",
     "project": "renderer, part 1. Inputs planes: float32 (3, 12, R, R) in [-1, 1] (planes xy, xz, yz; channels beyond "
                "the scene's zero); interp: float32 (B, R), the bilinear weights of B grid coordinates over R texels. "
-               "Output tables: float32 (3, B*B, 32), the decoder's first layer (without bias) at every grid node.",
-    "field": "renderer, part 2. Inputs tables: float32 (3, T, 32) from project; rows: int64 (M, 3), the table row of each "
+               "Output tables: float32 (3, B*B, H), the decoder's first layer (without bias) at every grid node; H is "
+               "the decoder's width (tri-dec-1: 32, tri-dec-2: 64; decoder_version in this graph's metadata).",
+    "field": "renderer, part 2. Inputs tables: float32 (3, T, H) from project (H the decoder's width); rows: int64 (M, 3), the table row of each "
              "point in each plane. Outputs density_logit: float32 (M,) (density = exp, clamped at 15); rgb: float32 "
              "(M, 3) in [0, 1].",
 }
 
 
-def _metadata(codec: str | None) -> dict:
+def _metadata(codec: str | None, decoder: str | None = None) -> dict:
     """The metadata of every graph; `codec`: the codec ids a restore graph reads (comma-separated, e.g.
-    'print-2,print-1'), None for the renderer's graphs, which every codec shares (they name no codec)."""
-    return {**({"codec_id": codec} if codec else {}), "decoder_version": formats.DECODER_VERSION,
+    'print-2,print-1'), None for the renderer's graphs, which every codec shares (they name no codec);
+    `decoder`: the renderer graphs' decoder version (default, and for restore graphs, the current one)."""
+    return {**({"codec_id": codec} if codec else {}), "decoder_version": decoder or formats.DECODER_VERSION,
             "snapshot_size": str(formats.SNAPSHOT_SIZE), "orbit_views": str(formats.ORBIT_VIEWS),
             "orbit_size": str(formats.ORBIT_SIZE), "orbit_elevation_deg": str(formats.ORBIT_ELEVATION_DEG),
             "orbit_fov_deg": str(formats.ORBIT_FOV_DEG), "c_max": str(formats.C_MAX), "opset": str(OPSET)}
 
 
-def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str | None, out_shapes: dict | None = None) -> int:
+def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str | None, out_shapes: dict | None = None,
+            decoder: str | None = None) -> int:
     """Metadata, doc string and declared output shapes (`out_shapes`: name -> dims, int or symbolic name,
     where the exporter left a dimension it could not name), checked, written atomically."""
     import onnx
@@ -74,7 +77,7 @@ def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str | None,
                 dim.dim_value = want
             else:
                 dim.dim_param = want
-    for k, v in _metadata(codec).items():
+    for k, v in _metadata(codec, decoder).items():
         model.metadata_props.append(onnx.StringStringEntryProto(key=k, value=v))
     model.producer_name = producer
     model.doc_string = DOCS[kind]
@@ -87,12 +90,12 @@ def _finish(buf: bytes, path: Path, producer: str, kind: str, codec: str | None,
 
 
 def _export(module, args, names_in, names_out, dynamic, path: Path, kind: str, codec: str | None = None,
-            out_shapes: dict | None = None) -> int:
+            out_shapes: dict | None = None, decoder: str | None = None) -> int:
     buf = io.BytesIO()
     with torch.no_grad():
         torch.onnx.export(module, args, buf, input_names=names_in, output_names=names_out, opset_version=OPSET,
                           dynamic_axes=dynamic, do_constant_folding=True, dynamo=False)
-    return _finish(buf.getvalue(), path, f"snapshot3d {kind}", kind, codec, out_shapes)
+    return _finish(buf.getvalue(), path, f"snapshot3d {kind}", kind, codec, out_shapes, decoder)
 
 
 def export_restore(codec, path: Path, codec_id: str = formats.FILE_CODEC) -> int:
@@ -121,18 +124,27 @@ def export_restore_print(path: Path) -> int:
                    out_shapes={"planes": [3, "C", "R", "R"], "reading": [3]})
 
 
-def export_project(decoder, path: Path) -> int:
+def export_project(decoder, path: Path, version: str = formats.DECODER_VERSION) -> int:
+    """The renderer's project graph of `decoder` (a loaded shared decoder of version `version`)."""
     planes = torch.rand(3, formats.C_MAX, 64, 64) * 2 - 1
     dynamic = {"planes": {2: "R", 3: "R"}, "interp": {0: "B", 1: "R"}, "tables": {1: "T"}}
     return _export(ProjectGraph(decoder).eval(), (planes, torch.rand(96, 64)), PROJECT_INPUTS, PROJECT_OUTPUTS,
-                   dynamic, path, "project", out_shapes={"tables": [3, "T", decoder.hidden]})
+                   dynamic, path, "project", out_shapes={"tables": [3, "T", decoder.hidden]}, decoder=version)
 
 
-def export_field(decoder, path: Path) -> int:
+def export_field(decoder, path: Path, version: str = formats.DECODER_VERSION) -> int:
+    """The renderer's field graph of `decoder` (version `version`)."""
     tables = torch.rand(3, 96 * 96, decoder.hidden)
     dynamic = {"tables": {1: "T"}, "rows": {0: "M"}, "density_logit": {0: "M"}, "rgb": {0: "M"}}
     return _export(FieldGraph(decoder).eval(), (tables, torch.randint(0, 96 * 96, (2048, 3))), FIELD_INPUTS,
-                   FIELD_OUTPUTS, dynamic, path, "field")
+                   FIELD_OUTPUTS, dynamic, path, "field", decoder=version)
+
+
+def decoder_keys() -> dict:
+    """export.json's key of each renderer graph -> (graph, decoder version): 'project' and 'field' are the current
+    decoder's, those of the versions older scenes name (`formats.DECODERS`) are 'project-<version>', 'field-<version>'."""
+    return {(g if d == formats.DECODER_VERSION else f"{g}-{d}"): (g, d) for d in formats.DECODERS
+            for g in ("project", "field")}
 
 
 def restore_keys() -> dict:
@@ -143,20 +155,19 @@ def restore_keys() -> dict:
 
 def export_all(out: Path, log=print) -> dict:
     """Write the models into `out` (the restore graph of every file codec this build reads, the print medium's
-    restore graph, and the renderer's two graphs); returns their paths and sizes, keyed as in `restore_keys`
-    and 'restore-print', 'project', 'field'."""
+    restore graph, and the renderer's two graphs of every decoder version this build reads); returns their paths
+    and sizes, keyed as in `restore_keys`, 'restore-print' and `decoder_keys`."""
     from snapshot3d.train.codec.hinet import codec_path, load_codec
     from snapshot3d.train.field.decoder import load_decoder
 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
-    decoder = load_decoder()
     names = {k: model_file("restore", c) for k, c in restore_keys().items()}
-    names.update({"restore-print": model_file("restore-print"), "project": model_file("project"),
-                  "field": model_file("field")})
+    names["restore-print"] = model_file("restore-print")
+    names.update({k: model_file(g, decoder=d) for k, (g, d) in decoder_keys().items()})
     sizes = {k: export_restore(load_codec(codec_path(c))[0], out / names[k], c) for k, c in restore_keys().items()}
     sizes["restore-print"] = export_restore_print(out / names["restore-print"])
-    sizes.update(project=export_project(decoder, out / names["project"]),
-                 field=export_field(decoder, out / names["field"]))
+    for k, (g, d) in decoder_keys().items():
+        sizes[k] = (export_project if g == "project" else export_field)(load_decoder(d), out / names[k], d)
     log(f"exported {', '.join(f'{names[k]} ({v / 1e6:.2f} MB)' for k, v in sizes.items())} in {time.time() - t0:.1f} s")
     return {k: {"path": str(out / names[k]), "bytes": v} for k, v in sizes.items()}

@@ -28,14 +28,14 @@ class TorchRun:
         return [t.numpy() for t in (out if isinstance(out, tuple) else (out,))]
 
 
-def torch_field_models():
-    """`viewer.runtime.FieldModels` computed by torch from the shipped decoder."""
+def torch_field_models(decoder: str = formats.DECODER_VERSION):
+    """`viewer.runtime.FieldModels` computed by torch from the shipped decoder of version `decoder`."""
     from snapshot3d.train.field.decoder import load_decoder
     from snapshot3d.viewer.runtime import FieldModels
 
     from .models import FIELD_INPUTS, PROJECT_INPUTS, FieldGraph, ProjectGraph
 
-    dec = load_decoder()
+    dec = load_decoder(decoder)
     return FieldModels(TorchRun(ProjectGraph(dec), PROJECT_INPUTS), TorchRun(FieldGraph(dec), FIELD_INPUTS))
 
 
@@ -44,9 +44,9 @@ def _ort_field_models(project_path, field_path):
     return FieldModels(session(str(project_path)), session(str(field_path)))
 
 
-def field_parity(project_path, field_path, size: int = 96) -> dict:
-    """Max abs difference of the views of spot's planes rendered through the ORT graphs and through
-    torch (the same renderer around them)."""
+def field_parity(project_path, field_path, size: int = 96, decoder: str = formats.DECODER_VERSION) -> dict:
+    """Max abs difference of the views of spot's planes rendered through the ORT graphs of decoder version
+    `decoder` and through torch (the same renderer around them)."""
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.viewer.render import render_views
 
@@ -54,13 +54,13 @@ def field_parity(project_path, field_path, size: int = 96) -> dict:
     c2w, intr = orbit_cameras(scene.orbit, 3, size)
     ort_views = render_views(_ort_field_models(project_path, field_path), scene.planes(), scene.box, c2w, intr,
                              size, size)
-    torch_views = render_views(torch_field_models(), scene.planes(), scene.box, c2w, intr, size, size)
+    torch_views = render_views(torch_field_models(decoder), scene.planes(), scene.box, c2w, intr, size, size)
     return {"views_max_abs_diff": float(np.abs(ort_views - torch_views).max())}
 
 
-def restore_parity(restore_path, project_path, field_path, size: int = 96, codec: str = formats.FILE_CODEC) -> dict:
+def restore_parity(restore_path, size: int = 96, codec: str = formats.FILE_CODEC) -> dict:
     """restore_psnr of spot hidden in a bundled host by file codec `codec`, restored by its torch network and by
-    the ORT graph at `restore_path` (same renderer)."""
+    the ORT graph at `restore_path` (the same renderer: the shipped graphs of the scene's decoder)."""
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.codecs import file_layout
     from snapshot3d.images import snapshot_nchw
@@ -69,7 +69,7 @@ def restore_parity(restore_path, project_path, field_path, size: int = 96, codec
     from snapshot3d.scene import dequantize_planes, quantize_planes
     from snapshot3d.train.codec.hinet import codec_path, embed_planes, load_codec, restore_secret
     from snapshot3d.viewer.render import render_views
-    from snapshot3d.viewer.runtime import session
+    from snapshot3d.viewer.runtime import field_models, session
 
     scene = _spot()
     net, _ = load_codec(codec_path(codec))
@@ -77,7 +77,7 @@ def restore_parity(restore_path, project_path, field_path, size: int = 96, codec
     sec_torch = restore_secret(net, snap)
     sec_ort = session(str(restore_path)).run(None, {"snapshot": snapshot_nchw(snap)})[0][0]
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
-    models = _ort_field_models(project_path, field_path)
+    models = field_models(decoder=scene.decoder_version)
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, size, size)
 
     def score(secret):
@@ -88,11 +88,12 @@ def restore_parity(restore_path, project_path, field_path, size: int = 96, codec
             "restore_psnr_onnx": b, "restore_psnr_diff_db": abs(a - b)}
 
 
-def print_parity(graph_path, project_path, field_path, size: int = 96, severity: str = "moderate") -> dict:
+def print_parity(graph_path, size: int = 96, severity: str = "moderate") -> dict:
     """The print medium's restore graph at `graph_path` (onnxruntime) against the numpy receiver it was written
     from (`print_read.despread` + `restore`): the shipped print scene hidden in a bundled host, read from the
     lossless snapshot and from the scan of a simulated `severity` photo of its sheet, both codecs' layouts;
-    the planes' largest difference, the share of 8-bit codes that differ, and restore_psnr each way."""
+    the planes' largest difference, the share of 8-bit codes that differ, and restore_psnr each way (rendered by the
+    shipped graphs of the scene's decoder)."""
     from snapshot3d.cameras import orbit_cameras
     from snapshot3d.codecs import print_embed, print_feeds, print_read
     from snapshot3d.metrics import psnr
@@ -102,12 +103,12 @@ def print_parity(graph_path, project_path, field_path, size: int = 96, severity:
     from snapshot3d.scanner.roundtrip import capture
     from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
     from snapshot3d.viewer.render import render_views
-    from snapshot3d.viewer.runtime import session
+    from snapshot3d.viewer.runtime import field_models, session
 
     scene = load_scene_file(asset("spot-print.s3d"))
     r, c = scene.resolution, scene.channels
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
-    models = _ort_field_models(project_path, field_path)
+    models = field_models(decoder=scene.decoder_version)
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, size, size)
     graph = session(str(graph_path))
     out = {}

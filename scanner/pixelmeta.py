@@ -8,7 +8,8 @@ permutation; a slot is one low-frequency DCT coefficient ((0,1), (1,0), (1,1)) o
 (the JPEG grid at the snapshot's origin), written by dither-modulation QIM with the frame's step.
 Coefficients at those frequencies survive JPEG quality 60 and resizing. `FRAME` is written: version 2, 38
 bytes (the codec as an index into `formats.MARK_CODECS`, the numbers as float16, as precise as the QR
-text's four significant digits), 10 repetitions at step 32. `LEGACY_FRAMES` are still read: version 1, 72
+text's four significant digits), 10 repetitions at step 32. The presence byte's top three bits hold the
+shared decoder's number minus one (`tri-dec-1` to `tri-dec-8`; zero in marks written before there were two). `LEGACY_FRAMES` are still read: version 1, 72
 bytes (the codec id as text, float32), 5 repetitions, at step 40 and at step 24. The shorter frame buys
 twice the repetitions, so the same copies read at a smaller step: the mark costs 42.4 dB of host PSNR
 instead of 40.7 (docs/file-codec.md "The metadata mark"). A meta that the short frame cannot hold (a codec id
@@ -80,6 +81,7 @@ LEGACY_FRAMES = (Frame(1, 72, 40.0), Frame(1, 72, 24.0))
 """frames of marks written by earlier versions, still read (the first also for metas FRAME cannot hold)"""
 _FORMATS = {1: ("<6f", "<3f", "<3f", "<2H", "<f"), 2: ("<6e", "<3e", "<3e", "<2H", "<e")}
 _F16_MAX = 65000.0
+_DECODER_SHIFT = 5   # the presence byte: bits 0-4 the fields, bits 5-7 the decoder's number minus one
 
 
 def _values(meta: SheetMeta) -> list:
@@ -107,8 +109,11 @@ def pack(meta: SheetMeta, frame: Frame = FRAME) -> bytes:
             raise ValueError(f"codec id {meta.codec!r} is too long for the pixel mark")
         codec = bytes([len(codec)]) + codec
     fields = _values(meta)
+    decoder = (meta.decoder or 1) - 1
+    if not 0 <= decoder < 8:
+        raise ValueError(f"decoder tri-dec-{meta.decoder} does not fit the pixel mark (tri-dec-1 to tri-dec-8)")
     body = bytes([frame.version, meta.version]) + codec
-    body += bytes([sum(1 << i for i, f in enumerate(fields) if f is not None)])
+    body += bytes([sum(1 << i for i, f in enumerate(fields) if f is not None) | decoder << _DECODER_SHIFT])
     for f, fmt in zip(fields, _FORMATS[frame.version]):
         if f is not None:
             body += struct.pack(fmt, *f)
@@ -150,8 +155,9 @@ def unpack(frame: bytes) -> SheetMeta | None:
         else:
             values.append(None)
     box, orbit, target, planes, strength = values
+    decoder = (flags >> _DECODER_SHIFT) + 1
     return SheetMeta(version, codec, box, orbit, target, tuple(int(v) for v in planes) if planes else None,
-                     strength[0] if strength else None)
+                     strength[0] if strength else None, None if decoder == 1 else decoder)
 
 
 @lru_cache(maxsize=4)

@@ -1,7 +1,8 @@
 """The sheet's QR code: payload text <-> metadata, and drawing/reading it with OpenCV 5.
 
 Payload (`formats` QR_*): "S3D<version>|<codec id>[|b=x0,y0,z0,x1,y1,z1][|o=radius,elevation,fov]
-[|t=x,y,z][|p=R,C][|s=strength]" (orbit target, plane resolution and channels, embedding strength).
+[|t=x,y,z][|p=R,C][|s=strength][|d=N]" (orbit target, plane resolution and channels, embedding strength,
+shared decoder `tri-dec-N`: absent on sheets of `tri-dec-1` scenes, which older builds made).
 The same text travels in a snapshot file's metadata (PNG text chunk or JPEG comment)."""
 from __future__ import annotations
 
@@ -37,12 +38,19 @@ class SheetMeta:
     """(R, C) of the hidden planes, or None"""
     strength: float | None = None
     """embedding strength the snapshot was made with, or None (1)"""
+    decoder: int | None = None
+    """N of the shared decoder `tri-dec-N` the scene was fitted for, or None (1: older sheets)"""
+
+    @property
+    def decoder_version(self) -> str:
+        return f"tri-dec-{self.decoder or 1}"
 
     def as_dict(self) -> dict:
         return {"version": self.version, "codec": self.codec,
                 "box": list(self.box) if self.box else None, "orbit": list(self.orbit) if self.orbit else None,
                 "target": list(self.target) if self.target else None,
-                "planes": list(self.planes) if self.planes else None, "strength": self.strength}
+                "planes": list(self.planes) if self.planes else None, "strength": self.strength,
+                "decoder": self.decoder}
 
 
 def _nums(values) -> str:
@@ -61,6 +69,8 @@ def encode_payload(meta: SheetMeta) -> str:
         parts.append("p=" + ",".join(str(int(v)) for v in meta.planes))
     if meta.strength is not None:
         parts.append("s=" + _nums([meta.strength]))
+    if meta.decoder is not None:
+        parts.append(f"d={int(meta.decoder)}")
     text = formats.QR_SEP.join(parts)
     if any(formats.QR_SEP in p for p in parts[1:2]):
         raise ValueError(f"codec id must not contain {formats.QR_SEP!r}")
@@ -69,7 +79,7 @@ def encode_payload(meta: SheetMeta) -> str:
 
 MAX_PAYLOAD = 512
 """characters of a metadata text (a QR code of the sheet holds about 100; longer text is refused unread)"""
-_LENGTHS = {"b": 6, "o": 3, "t": 3, "p": 2, "s": 1}
+_LENGTHS = {"b": 6, "o": 3, "t": 3, "p": 2, "s": 1, "d": 1}
 
 
 def decode_payload(text: str) -> SheetMeta:
@@ -104,7 +114,13 @@ def decode_payload(text: str) -> SheetMeta:
             raise ValueError(f"malformed field p= in QR payload (two integers in 0..65535 expected): {text[:60]!r}")
         planes = tuple(int(v) for v in fields["p"])
     strength = fields["s"][0] if "s" in fields else None
-    return SheetMeta(int(version), parts[1], fields.get("b"), fields.get("o"), fields.get("t"), planes, strength)
+    decoder = None
+    if "d" in fields:
+        if not (fields["d"][0].is_integer() and 0 <= fields["d"][0] < 1 << 16):
+            raise ValueError(f"malformed field d= in QR payload (an integer in 0..65535 expected): {text[:60]!r}")
+        decoder = int(fields["d"][0])
+    return SheetMeta(int(version), parts[1], fields.get("b"), fields.get("o"), fields.get("t"), planes, strength,
+                     decoder)
 
 
 def check_meta(meta: SheetMeta, where: str = "the snapshot's metadata", require_codec: bool = True) -> SheetMeta:
@@ -129,6 +145,9 @@ def check_meta(meta: SheetMeta, where: str = "the snapshot's metadata", require_
         validate.numbers(meta.target, f"{where}: target t=", 3, -validate.WORLD_LIMIT, validate.WORLD_LIMIT)
     if meta.strength is not None:
         validate.number(meta.strength, f"{where}: strength s=", *validate.STRENGTH_RANGE)
+    if meta.decoder_version not in formats.DECODERS:
+        raise UserError(f"{where}: the scene was fitted for decoder {meta.decoder_version} (d={meta.decoder}), but "
+                        f"this build has decoder {', '.join(formats.DECODERS)}; update snapshot3d")
     return meta
 
 
@@ -178,4 +197,13 @@ def scene_meta(scene, codec: str = MEDIA[formats.DEFAULT_MEDIUM].codec, strength
     return SheetMeta(codec=codec, box=tuple(float(v) for v in np.asarray(scene.box).ravel()),
                      orbit=(float(o.radius), float(o.elevation_deg), float(o.fov_deg)),
                      target=tuple(float(v) for v in o.target), planes=(scene.resolution, scene.channels),
-                     strength=None if strength is None else float(strength))
+                     strength=None if strength is None else float(strength),
+                     decoder=_decoder_field(scene.decoder_version))
+
+
+def _decoder_field(version: str) -> int | None:
+    """The d= field of a scene fitted for `version`: None for tri-dec-1 (sheets as older builds made them)."""
+    n = formats.decoder_number(version)
+    if n is None:
+        raise ValueError(f"decoder version {version!r} is not of the form tri-dec-N")
+    return None if n == 1 else n

@@ -96,7 +96,7 @@ def metas_agree(a: SheetMeta, b: SheetMeta) -> bool:
     """The same metadata up to the text's four significant digits."""
     def close(x, y):
         return (x is None) == (y is None) and (x is None or np.allclose(x, y, rtol=1e-3, atol=1e-4))
-    return (a.version, a.codec, a.planes) == (b.version, b.codec, b.planes) and all(
+    return (a.version, a.codec, a.planes, a.decoder_version) == (b.version, b.codec, b.planes, b.decoder_version) and all(
         close(getattr(a, k), getattr(b, k)) for k in ("box", "orbit", "target", "strength"))
 
 

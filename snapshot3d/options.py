@@ -24,6 +24,9 @@ def add_dataclass_options(parser: argparse.ArgumentParser, cls, skip: tuple = ()
         help_ = f.metadata.get("help", "") or " "
         if f.type in (bool, "bool"):
             parser.add_argument(flag, dest=f.name, action=argparse.BooleanOptionalAction, default=f.default, help=help_)
+        elif f.type in (tuple, "tuple"):  # one or more values of the default's element type
+            typ = type(f.default[0]) if f.default else str
+            parser.add_argument(flag, dest=f.name, nargs="+", type=typ, default=f.default, help=help_)
         else:
             typ = {"int": int, "float": float, int: int, float: float}.get(f.type, str)
             parser.add_argument(flag, dest=f.name, type=typ, default=f.default, help=help_)
@@ -32,4 +35,5 @@ def add_dataclass_options(parser: argparse.ArgumentParser, cls, skip: tuple = ()
 def config_from_args(cls, args, **override):
     """An instance of dataclass `cls` from parsed options (fields missing from `args` keep their default)."""
     values = {f.name: getattr(args, f.name) for f in dataclasses.fields(cls) if hasattr(args, f.name)}
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
     return cls(**{**values, **override})

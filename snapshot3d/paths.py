@@ -16,9 +16,10 @@ def asset(name: str = "") -> Path:
     return base / name if name else base
 
 
-def model_file(kind: str, codec: str | None = None) -> str:
+def model_file(kind: str, codec: str | None = None, decoder: str | None = None) -> str:
     """File name of an exported model: kind 'restore' (a file medium's restore network; names its codec,
     default `formats.FILE_CODEC`), 'restore-print' (the print medium's receiver, one graph for every print
-    codec), 'project' or 'field' (name the decoder)."""
+    codec), 'project' or 'field' (name their decoder version, default `formats.DECODER_VERSION`)."""
+    decoder = decoder or formats.DECODER_VERSION
     return {"restore": f"restore-{codec or formats.FILE_CODEC}.onnx", "restore-print": "restore-print.onnx",
-            "project": f"project-{formats.DECODER_VERSION}.onnx", "field": f"field-{formats.DECODER_VERSION}.onnx"}[kind]
+            "project": f"project-{decoder}.onnx", "field": f"field-{decoder}.onnx"}[kind]

@@ -104,10 +104,10 @@ def save_scene(scene: Scene, path) -> None:
         raise
 
 
-def load_scene_file(path, expect_decoder: str | None = formats.DECODER_VERSION) -> Scene:
+def load_scene_file(path, expect_decoder: tuple | None = formats.DECODERS) -> Scene:
     """Read a `.s3d`; refuses (one-line UserError naming the field and its allowed range) a missing,
     corrupt or oversized file, one whose arrays or header are malformed or out of range, and a scene made
-    for another decoder. Sizes are checked from the zip directory and the `.npy` headers before anything
+    for a decoder not in `expect_decoder` (default: every version this build decodes). Sizes are checked from the zip directory and the `.npy` headers before anything
     is allocated (`validate.SCENE_MAX_BYTES`, `validate.SCENE_MAX_RES`, `formats.C_MAX`)."""
     path = Path(path)
     if not path.is_file():
@@ -125,9 +125,9 @@ def load_scene_file(path, expect_decoder: str | None = formats.DECODER_VERSION) 
     dec = header.get("decoder_version")
     if not isinstance(dec, str) or len(dec) > 64:
         raise UserError(f"{path}: header decoder_version must be a short text, got {validate.show(dec)}")
-    if expect_decoder is not None and dec != expect_decoder:
-        raise UserError(f"{path} was fitted for decoder {dec!r}, but this build has decoder {expect_decoder!r}; "
-                        f"fit the scene again")
+    if expect_decoder is not None and dec not in expect_decoder:
+        raise UserError(f"{path} was fitted for decoder {dec!r}, but this build has decoder "
+                        f"{', '.join(map(repr, expect_decoder))}; fit the scene again")
     name, meta = header.get("name", ""), header.get("meta", {})
     if not isinstance(name, str) or not isinstance(meta, dict):
         raise UserError(f"{path}: header name must be a text and meta an object")

@@ -95,7 +95,7 @@ def test_embed_sheet_simulate_decode_end_to_end(tmp_path):
     back, orig = load_scene_file(tmp_path / "out" / "scene.s3d"), load_scene_file(ASSETS / "spot.s3d")
     np.testing.assert_allclose(back.box, orig.box, rtol=1e-3)
     c2w, intr = orbit_cameras(orig.orbit, 3, 64)
-    ref = render_views(field_models(), orig.planes(), orig.box, c2w, intr, 64, 64)
+    ref = render_views(field_models(decoder=orig.decoder_version), orig.planes(), orig.box, c2w, intr, 64, 64)
     got = np.stack([cv2.cvtColor(cv2.imread(str(tmp_path / "out" / "views" / f"{i:03d}.png")), cv2.COLOR_BGR2RGB)
                     for i in range(3)]) / 255.0
     assert psnr(got, ref) >= 22.0  # views through a JPEG-90 capture (24.2 dB here at 64x64; 27.6 at 380)

@@ -77,9 +77,10 @@ def test_nerfstudio_round_trip_and_undistortion(tmp_path, source):
     assert np.abs(q.images - source.images).mean() > 1e-3
 
 
-def test_nerfstudio_fisheye_is_refused(tmp_path, source):
-    with pytest.raises(UserError, match="OPENCV_FISHEYE is not supported"):
-        load_scene(str(_nerfstudio(tmp_path, source, camera_model="OPENCV_FISHEYE")))
+def test_nerfstudio_unknown_camera_model_is_refused(tmp_path, source):
+    """OPENCV_FISHEYE is undistorted now (tests/test_capture_input.py); a model no loader knows is refused."""
+    with pytest.raises(UserError, match="camera model 'EQUIRECTANGULAR' is not supported"):
+        load_scene(str(_nerfstudio(tmp_path, source, camera_model="EQUIRECTANGULAR")))
 
 
 @pytest.mark.parametrize("text,match", [("{not json", "not valid JSON"), ('{"frames": 3}', "no 'frames' list"),

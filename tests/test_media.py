@@ -74,7 +74,7 @@ def test_sheet_qr_names_the_codec_and_a_moderate_photo_decodes(print_snapshot):
     assert rep["scan"]["qr"]["codec"] == formats.PRINT_CODEC
     orig = load_scene_file(SCENE)
     c2w, intr = orbit_cameras(orig.orbit, 4, 96)
-    ref = render_views(field_models(), orig.planes(), orig.box, c2w, intr, 96, 96)
+    ref = render_views(field_models(decoder=orig.decoder_version), orig.planes(), orig.box, c2w, intr, 96, 96)
     got = np.stack([cv2.cvtColor(cv2.imread(str(tmp / "out" / "views" / f"{i:03d}.png")), cv2.COLOR_BGR2RGB)
                     for i in range(4)]) / 255.0
     measured = psnr(got, ref)

@@ -9,6 +9,7 @@ import numpy as np
 import onnxruntime as ort
 import pytest
 
+from snapshot3d import formats
 from snapshot3d.viewer.runtime import model_path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -16,10 +17,11 @@ VECTORS = ROOT / "tests" / "data" / "onnx-conformance.npz"
 SNAPSHOT = ROOT / "tests" / "data" / "spot-snapshot.png"
 CONTRACT = {  # kind: (inputs, outputs) as (name, shape, dtype); str dims are symbolic
     "restore": ([("snapshot", [1, 3, 380, 380], "tensor(float)")], [("secret", [1, 24, 95, 95], "tensor(float)")]),
-    "project": ([("planes", [3, 12, "R", "R"], "tensor(float)"), ("interp", ["B", "R"], "tensor(float)")],
-                [("tables", [3, None, 32], "tensor(float)")]),
-    "field": ([("tables", [3, None, 32], "tensor(float)"), ("rows", [None, 3], "tensor(int64)")],
-              [("density_logit", [None], "tensor(float)"), ("rgb", [None, 3], "tensor(float)")]),
+    **{f"project{v}": ([("planes", [3, 12, "R", "R"], "tensor(float)"), ("interp", ["B", "R"], "tensor(float)")],
+                       [("tables", [3, None, h], "tensor(float)")]) for v, h in (("", 32), ("-tri-dec-2", 64))},
+    **{f"field{v}": ([("tables", [3, None, h], "tensor(float)"), ("rows", [None, 3], "tensor(int64)")],
+                     [("density_logit", [None], "tensor(float)"), ("rgb", [None, 3], "tensor(float)")])
+       for v, h in (("", 32), ("-tri-dec-2", 64))},
     "restore-print": ([("snapshot", [1, 3, 380, 380], "tensor(float)"), ("chips", ["N", "K"], "tensor(int64)"),
                        ("base", ["N", "K"], "tensor(float)"), ("place", ["S"], "tensor(int64)"),
                        ("scale", ["M"], "tensor(float)"), ("prior", ["M"], "tensor(float)"),
@@ -69,7 +71,9 @@ def vectors():
 
 
 def _session(kind):
-    return ort.InferenceSession(str(model_path(kind)), providers=["CPUExecutionProvider"])
+    """kind as in CONTRACT: 'project-tri-dec-2' is that decoder's project graph, 'project' the default one's."""
+    graph, _, decoder = kind.partition("-") if kind.startswith(("project-", "field-")) else (kind, "", None)
+    return ort.InferenceSession(str(model_path(graph, decoder=decoder)), providers=["CPUExecutionProvider"])
 
 
 def _same(spec, got):
@@ -92,6 +96,8 @@ def test_graph_signature_and_doc_string(kind):
         assert name in meta.description
     props = meta.custom_metadata_map
     assert {"decoder_version", "snapshot_size", "c_max"} <= set(props)
+    if kind.startswith(("project", "field")):
+        assert props["decoder_version"] == (kind.partition("-")[2] or formats.DECODER_VERSION)
     if kind.startswith("restore"):   # the codec ids the graph reads, comma-separated, newest first
         assert props["codec_id"] == {"restore": "hinet-3", "restore-print": "print-2,print-1"}[kind]
     else:                            # the renderer's graphs serve every codec: they name none

@@ -32,7 +32,7 @@ def test_fast_renderer_matches_reference_renderer():
     scene = load_scene_file(SPOT)
     ref = render_scene(scene, 3, 96, show_progress=False)
     c2w, intr = orbit_cameras(scene.orbit, 3, 96)
-    got = render_views(field_models(), scene.planes(), scene.box, c2w, intr, 96, 96)
+    got = render_views(field_models(decoder=scene.decoder_version), scene.planes(), scene.box, c2w, intr, 96, 96)
     assert got.shape == (3, 96, 96, 3) and got.dtype == np.float32
     assert psnr(got, ref) >= 30.0  # 32.6 dB here; 36.0 dB at 380x380 (bench decode)
 
@@ -45,7 +45,7 @@ def test_fewer_samples_and_coarser_bake_cost_accuracy():
     c2w, intr = orbit_cameras(scene.orbit, 2, 96)
     score = {}
     for name, cfg in {"default": RenderConfig(), "few": RenderConfig(samples=4), "coarse": RenderConfig(bake=32)}.items():
-        score[name] = psnr(render_views(field_models(), scene.planes(), scene.box, c2w, intr, 96, 96, cfg), ref)
+        score[name] = psnr(render_views(field_models(decoder=scene.decoder_version), scene.planes(), scene.box, c2w, intr, 96, 96, cfg), ref)
     assert score["default"] > score["few"] + 1.0 and score["default"] > score["coarse"] + 1.0, score
 
 
@@ -109,10 +109,10 @@ def test_morphology_and_composite():
 
 def test_bake_refines_only_near_the_surface():
     scene = load_scene_file(SPOT)
-    baked = bake_field(field_models(), pad_planes(scene.planes()), Frame.from_box(scene.box), 64)
+    baked = bake_field(field_models(decoder=scene.decoder_version), pad_planes(scene.planes()), Frame.from_box(scene.box), 64)
     assert baked.grid.shape == (64, 64, 64, 4) and baked.sigma.shape == (32, 32, 32)
     assert 16 ** 3 < baked.evaluated < 0.6 * 64 ** 3
     with pytest.raises(ValueError, match="multiple of 8 from 8 to 176"):
-        bake_field(field_models(), pad_planes(scene.planes()), Frame.from_box(scene.box), 60)
+        bake_field(field_models(decoder=scene.decoder_version), pad_planes(scene.planes()), Frame.from_box(scene.box), 60)
     with pytest.raises(ValueError, match="from 8 to 176"):
-        bake_field(field_models(), pad_planes(scene.planes()), Frame.from_box(scene.box), 184)
+        bake_field(field_models(decoder=scene.decoder_version), pad_planes(scene.planes()), Frame.from_box(scene.box), 184)

@@ -52,7 +52,8 @@ def test_lossless_round_trip(sheet, snapshot):
     assert psnr(res.snapshot / 255.0, snapshot / 255.0) >= 40.0
     assert np.abs(res.corners - np.array(truth["corners"])).max() < 0.05
     assert res.qr == {"version": 1, "codec": MEDIA[formats.DEFAULT_MEDIUM].codec, "box": [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0],
-                      "orbit": [3.0, 20.0, 40.0], "target": None, "planes": None, "strength": None}
+                      "orbit": [3.0, 20.0, 40.0], "target": None, "planes": None, "strength": None,
+                      "decoder": None}
     assert tuple(res.report()) == REPORT_KEYS and res.confidence > 0.9
 
 

@@ -45,7 +45,8 @@ def scene_from_meta(codes: np.ndarray, meta) -> Scene:
         r, el, fov = meta.orbit
     else:
         r, el, fov = float(np.linalg.norm(box[1] - box[0])), formats.ORBIT_ELEVATION_DEG, formats.ORBIT_FOV_DEG
-    return Scene(codes=codes, box=box, orbit=Orbit(r, el, fov, target), name="decoded")
+    return Scene(codes=codes, box=box, orbit=Orbit(r, el, fov, target), name="decoded",
+                 decoder_version=meta.decoder_version)
 
 
 def _meta(qr: dict | None):
@@ -128,7 +129,8 @@ def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
     planes, codec_info = restore_checked(snapshot, meta)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
-    baked = bake_field(field_models(), pad_planes(planes), Frame.from_box(scene.box), cfg.bake)
+    baked = bake_field(field_models(decoder=scene.decoder_version), pad_planes(planes), Frame.from_box(scene.box),
+                       cfg.bake)
     t3 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
     pilot = None if res is None else res.pilot_psnr
@@ -138,7 +140,7 @@ def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
         "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3)},
         "codec": meta.codec, "medium": CODEC_MEDIUM[meta.codec],
         "quality_estimate": quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected")),
-        "planes": list(meta.planes), "render": cfg.__dict__,
+        "planes": list(meta.planes), "decoder": scene.decoder_version, "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
         "scan": None if res is None else {k: v for k, v in res.report().items()
                                           if k in ("corners", "reprojection_px", "qr")},
@@ -159,7 +161,7 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
             first.append(time.perf_counter())
         if on_view is not None:
             on_view(i)
-    out = render_views(field_models(), ds.planes, ds.scene.box, c2w, intr, size, size, cfg, baked=ds.baked,
+    out = render_views(field_models(decoder=ds.scene.decoder_version), ds.planes, ds.scene.box, c2w, intr, size, size, cfg, baked=ds.baked,
                        on_view=_tick)
     t4 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731

@@ -31,7 +31,7 @@ def demo_command(args) -> int:
           f"severity moderate) ...", flush=True)
     dec = decode_photo(photo)
     c2w, intr = orbit_cameras(original.orbit, formats.ORBIT_VIEWS, formats.ORBIT_SIZE)
-    ref = render_views(field_models(), original.planes(), original.box, c2w, intr,
+    ref = render_views(field_models(decoder=original.decoder_version), original.planes(), original.box, c2w, intr,
                        formats.ORBIT_SIZE, formats.ORBIT_SIZE)
     dec.report["restore_psnr"] = round(psnr(dec.views, ref), 2)
     out.mkdir(parents=True, exist_ok=True)

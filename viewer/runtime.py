@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
+from snapshot3d import formats
 from snapshot3d.errors import UserError
 from snapshot3d.paths import asset, model_file
 
@@ -24,17 +25,19 @@ class FieldModels:
     field: object
 
 
-def model_path(kind: str, codec: str | None = None) -> Path:
+def model_path(kind: str, codec: str | None = None, decoder: str | None = None) -> Path:
     """kind 'restore' (of `codec`, default the file medium's current one), 'restore-print', 'project' or
-    'field' -> the packaged model file."""
-    return asset(model_file(kind, codec))
+    'field' (of `decoder`, default `formats.DECODER_VERSION`) -> the packaged model file."""
+    return asset(model_file(kind, codec, decoder))
 
 
-def field_models(threads: int | None = None) -> FieldModels:
-    return FieldModels(session(str(model_path("project")), threads), session(str(model_path("field")), threads))
+def field_models(threads: int | None = None, decoder: str = formats.DECODER_VERSION) -> FieldModels:
+    """The project and field graphs of decoder version `decoder` (a scene's `decoder_version`)."""
+    return FieldModels(session(str(model_path("project", decoder=decoder)), threads),
+                       session(str(model_path("field", decoder=decoder)), threads))
 
 
-@lru_cache(maxsize=8)
+@lru_cache(maxsize=16)
 def session(path: str, threads: int | None = None):
     import onnxruntime as ort
 

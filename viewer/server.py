@@ -47,7 +47,8 @@ STATIC = Path(__file__).resolve().parent / "static"
 DECODE_PATH = "/v1/decode"
 # `restore` is the file codec embed writes now; `restore-<codec>` names each file codec this build reads, so that
 # a client can fetch the graph an older snapshot's metadata names (docs/onnx-contract.md section 2)
-MODEL_ROUTES = ("restore", *(f"restore-{c}" for c in formats.FILE_CODECS), "restore-print", "project", "field")
+MODEL_ROUTES = ("restore", *(f"restore-{c}" for c in formats.FILE_CODECS), "restore-print", "project", "field",
+                *(f"{k}-{d}" for d in formats.DECODERS for k in ("project", "field")))
 RENDER_DISTANCE = (0.01, 50.0)  # /render's distance, in orbit radii
 
 
@@ -258,7 +259,8 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
         if kind not in MODEL_ROUTES:
             raise ApiError(404, f"no model {kind!r} ({', '.join(MODEL_ROUTES)})")
         codec = kind.removeprefix("restore-") if kind.startswith("restore-hinet") else None
-        path = model_path("restore", codec) if codec else model_path(kind)
+        graph, _, decoder = kind.partition("-") if kind.startswith(("project-", "field-")) else (kind, "", None)
+        path = model_path("restore", codec) if codec else model_path(graph, decoder=decoder)
         return FileResponse(path, media_type="application/octet-stream")
 
     @app.get("/v1/models/print-layout.npz", summary="the restore-print graph's layout inputs for one print codec and "

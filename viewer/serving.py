@@ -49,7 +49,8 @@ class BakedCache:
                 self._items.move_to_end(sid)
                 return self._items[sid]
         scene = load_scene_file(folder / "scene.s3d")
-        baked = bake_field(field_models(), pad_planes(scene.planes()), Frame.from_box(scene.box), cfg.bake)
+        baked = bake_field(field_models(decoder=scene.decoder_version), pad_planes(scene.planes()),
+                           Frame.from_box(scene.box), cfg.bake)
         self.put(sid, scene, baked)
         return scene, baked
 
@@ -83,7 +84,7 @@ def png_bytes(rgb01: np.ndarray) -> bytes:
 
 
 def _render(scene, baked: Baked, c2w, intr, size: int, cfg: RenderConfig) -> np.ndarray:
-    return render_views(field_models(), None, scene.box, c2w, intr, size, size, cfg, baked=baked)[0]
+    return render_views(field_models(decoder=scene.decoder_version), None, scene.box, c2w, intr, size, size, cfg, baked=baked)[0]
 
 
 def render_png(scene, baked: Baked, azimuth: float, elevation: float, distance: float | None, size: int,

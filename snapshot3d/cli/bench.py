@@ -146,6 +146,24 @@ def add_commands(sub) -> None:
     bf.add_argument("--cache", default=None, help="file caching the shared prefix of the fit (reused when present)")
     _quick(bf, steps=20, hosts="coffee", severities="moderate", seeds=1, views=2)
 
+    bv = add(bsub, "decoders", "shared decoder versions through a print: e2e_psnr at held-out views of the same "
+                               "scene fitted for each, per severity, paired by photo",
+             _run("snapshot3d.bench.decoders", "bench_decoders_command"))
+    _out(bv)
+    bv.add_argument("--scenes", default="bench/models/spot-print.s3d,bench/models/spot-print-tri-dec-2.s3d,"
+                                        "bench/models/lego-print-auto.s3d,bench/models/lego-print-tri-dec-2.s3d",
+                    help="comma-separated scene files: one scene fitted for each decoder, named <scene>-...")
+    bv.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from codec training)")
+    bv.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
+    bv.add_argument("--severities", default="mild,moderate,severe", help="comma-separated physical severities")
+    bv.add_argument("--seeds", type=int, default=3, help="simulated photos per severity and host")
+    bv.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
+    bv.add_argument("--size", type=int, default=96, help="orbit view size for restore_psnr")
+    bv.add_argument("--search", default="bench/results/decoder_search.jsonl",
+                    help="rows of the decoder search (JSON lines) to chart beside (empty: none)")
+    _quick(bv, scenes="bench/models/spot-print.s3d", hosts="coffee", heldout=0, severities="moderate", seeds=1,
+           views=2, size=48, search="")
+
     bc = add(bsub, "codec", "a medium's codec: host fidelity vs restore_psnr through simulate+scan; baselines; "
                             "charts (codec.* for the file medium, codec_print.* for the print medium)",
              _run("snapshot3d.bench.codec", "bench_codec_command"))

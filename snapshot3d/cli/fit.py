@@ -16,12 +16,13 @@ def add_commands(sub) -> None:
     """Add fit, render, mesh and train to the top-level subparsers `sub`."""
     from snapshot3d.train.codec.config import CodecConfig  # torch-free dataclasses
     from snapshot3d.train.codec.print_config import PrintCodecConfig
-    from snapshot3d.train.field.config import FitConfig
+    from snapshot3d.train.field.config import DecoderConfig, FitConfig
 
     f = _add(sub, "fit", "fit a compact tri-plane scene to posed images (torch)",
              _run("snapshot3d.train.field.commands", "fit_command"))
-    f.add_argument("scene", help="Blender folder, nerfstudio transforms.json (or its folder), or builtin:NAME "
-                                 "(procedural, spot, duck, teapot, bunny, suzanne)")
+    f.add_argument("scene", help="Blender folder, nerfstudio transforms.json (or its folder), COLMAP text model "
+                                 "(cameras.txt + images.txt, or a folder with sparse/0/), or builtin:NAME "
+                                 "(procedural, spot, duck, teapot, bunny, suzanne); see docs/capture.md")
     f.add_argument("-o", "--output", required=True, help="scene file to write (.s3d)")
     f.add_argument("--budget", default="fixed", choices=("fixed", "auto"),
                    help="auto: fit a ladder of plane sizes and keep the smallest within 0.5 dB of the best (by "
@@ -30,6 +31,16 @@ def add_commands(sub) -> None:
                    help="with --budget auto: the medium the scene will travel through; its codec's loss at each "
                         "payload counts (print: a photographed print carries far less, so smaller planes win)")
     f.add_argument("--downscale", type=int, default=1, help="divide image size by this on load")
+    f.add_argument("--max-size", type=int, default=800,
+                   help="then shrink images so that the longer side is at most this many pixels (not builtin scenes)")
+    f.add_argument("--holdout", type=int, default=None,
+                   help="hold out every N-th frame (the 0th, N-th, ...) for field_psnr; 0: none, and the training "
+                        "frames are scored (default: Blender's test split, builtin's test views, else every 8th)")
+    f.add_argument("--box", help="world box x0,y0,z0,x1,y1,z1 (in the world after --up; write --box=-1,... when it "
+                                 "starts with a minus) instead of the one carved from masks or placed by the cameras")
+    f.add_argument("--up", help="the world's up axis, x,y,z or auto (the mean of the cameras' up vectors); the world is "
+                                "turned so that it becomes +z (default: auto for nerfstudio and COLMAP, as given for "
+                                "Blender and builtin; 0,0,1 keeps it)")
     f.add_argument("--size", type=int, default=200, help="view size of builtin scenes")
     f.add_argument("--resume", action="store_true", help="continue from OUTPUT.ckpt if present")
     f.add_argument("--report", help="write a JSON report here")
@@ -53,8 +64,7 @@ def add_commands(sub) -> None:
     tsub = t.add_subparsers(dest="what", required=True, metavar="WHAT")
     td = _add(tsub, "decoder", "train the shared decoder jointly over builtin scenes (resumable)",
               _run("snapshot3d.train.field.commands", "train_decoder_command"))
-    td.add_argument("--steps", type=int, default=6000, help="optimisation steps, the scenes taken in turn")
-    td.add_argument("--seed", type=int, default=0, help="random seed")
+    add_dataclass_options(td, DecoderConfig)
     td.add_argument("-o", "--output", help="weights file (default: the package's assets)")
     td.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help=DEVICE_HELP)
     tc = _add(tsub, "codec", "train the file medium's hiding codec through the differentiable channel (resumable)",

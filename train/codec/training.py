@@ -133,7 +133,11 @@ def train_codec(cfg: CodecConfig, data: CodecData, out: Path, checkpoint: Path |
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     gen = torch.Generator().manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
-    decoder = load_decoder().to(dev)
+    versions = sorted({sc.decoder_version for sc in data.scenes})
+    if len(versions) > 1:
+        raise UserError(f"the training scenes were fitted for different decoders ({', '.join(versions)}); fit them "
+                        f"again with one")
+    decoder = load_decoder(versions[0] if versions else formats.DECODER_VERSION).to(dev)
     views = _Views(decoder)
     step, logw, history = 0, initial_host_logw(cfg.init), []
     if cfg.init:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +12,7 @@ from snapshot3d import formats
 from snapshot3d.cameras import orbit_cameras as _orbit_cameras
 from snapshot3d.errors import UserError
 from snapshot3d.images import contact_sheet, write_gif, write_png, write_views
+from snapshot3d.options import config_from_args
 from snapshot3d.outputs import staged_folder
 from snapshot3d.progress import progress
 from snapshot3d.reports import write_json
@@ -51,17 +51,20 @@ def _default_orbit(posed) -> Orbit:
 
 
 def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int = 1, checkpoint=None,
-              size: int = 200, quiet: bool = False, device=None, medium: str | None = None):
-    """Load, fit (on `device`: a torch.device, a --device name, or None: the CPU) and evaluate. Returns
-    (Scene, report dict, held-out renders). The capture is loaded before torch is imported, so that a
-    wrong path fails at once."""
+              size: int = 200, quiet: bool = False, device=None, medium: str | None = None, capture=None):
+    """Load (`capture`: snapshot3d.capture.CaptureOptions, the split, box, up axis and size limit), fit (on
+    `device`: a torch.device, a --device name, or None: the CPU) and evaluate. Returns (Scene, report dict,
+    held-out renders). The capture is loaded before torch is imported, so that a wrong path fails at once;
+    one line says what was read."""
+    from snapshot3d.capture import describe
     from snapshot3d.loaders import load_scene
     from snapshot3d.scene import dequantize_planes
 
-    posed = load_scene(spec, downscale=downscale, size=size) if spec.startswith("builtin:") else \
-        load_scene(spec, downscale=downscale)
-    if posed.skipped and not quiet:
-        print(f"{posed.name}: {posed.skipped} listed frames have no image and were skipped")
+    posed = load_scene(spec, downscale=downscale, capture=capture, size=size) if spec.startswith("builtin:") else \
+        load_scene(spec, downscale=downscale, capture=capture)
+    read = posed.info.get("capture")
+    if read and not quiet:
+        print(describe(read))
     from ..device import resolve_device
     from .budget import fit_ladder
     from .decoder import load_decoder
@@ -69,7 +72,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     from .fit import fit
 
     device = resolve_device(device) if isinstance(device, str) else device
-    decoder = load_decoder().to(device or "cpu")
+    decoder = load_decoder(cfg.decoder).to(device or "cpu")
     t0 = time.perf_counter()
     log = (lambda *_: None) if quiet else print
     bars = None if quiet else _bar
@@ -93,17 +96,21 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     else:
         raise UserError(f"--budget must be 'fixed' or 'auto', not {budget!r}")
     seconds = time.perf_counter() - t0
-    scene = Scene(codes=codes, box=posed.box, orbit=_default_orbit(posed), name=posed.name,
+    scene = Scene(codes=codes, box=posed.box, orbit=_default_orbit(posed), name=posed.name, decoder_version=cfg.decoder,
                   meta={"source": spec, "train_views": int(len(posed.train)), "test_views": int(len(posed.test)),
                         **({"size": size} if spec.startswith("builtin:") else {"downscale": downscale}),
                         **({"medium": medium} if medium else {})})
     report = {"field_psnr": round(float(ev["field_psnr"]), 3), "field_ssim": round(float(ev["field_ssim"]), 4),
               "scene_kb": round(scene.scene_kb, 2), "fit_seconds": round(seconds, 1), "steps": steps,
               "plane_res": scene.resolution, "plane_channels": scene.channels, **report}
+    if read and not spec.startswith("builtin:"):   # a builtin scene's split and box are fixed by its name and size
+        report["field_psnr_on"] = "training frames (--holdout 0)" if read["holdout"] == 0 else "held-out frames"
+        report["capture"] = read
     return scene, report, ev["renders"]
 
 
 def fit_command(args) -> int:
+    from snapshot3d.capture import CaptureOptions, parse_box, parse_up
     cfg = check_fit_config(FitConfig(**{k: getattr(args, k) for k in FitConfig.__dataclass_fields__}))
     integer(cfg.plane_res, "--plane-res", 2, SCENE_MAX_RES)   # what a scene file holds
     integer(args.size, "--size", *VIEW_SIZE)
@@ -116,8 +123,10 @@ def fit_command(args) -> int:
     if args.medium and args.budget != "auto":
         raise UserError("--medium chooses the plane size with --budget auto; with --budget fixed give --plane-res "
                         "and --plane-channels")
+    capture = CaptureOptions(holdout=getattr(args, "holdout", None), box=parse_box(getattr(args, "box", None)),
+                             up=parse_up(getattr(args, "up", None)), max_size=getattr(args, "max_size", None))
     scene, report, _ = fit_scene(args.scene, cfg, args.budget, args.downscale, ckpt, size=args.size,
-                                 device=args.device, medium=args.medium)
+                                 device=args.device, medium=args.medium, capture=capture)
     throughput = report.pop("_throughput", None)
     save_scene(scene, out)
     if ckpt is not None and ckpt.exists():
@@ -195,8 +204,8 @@ def mesh_command(args) -> int:
 def train_decoder_command(args) -> int:
     from .config import DecoderConfig
     from .decoder import decoder_path, train_decoder
-    cfg = replace(DecoderConfig(), steps=args.steps, seed=args.seed)
-    out = Path(args.output) if args.output else decoder_path()
+    cfg = config_from_args(DecoderConfig, args)
+    out = Path(args.output) if args.output else decoder_path(cfg.version)
     ckpt = out.with_name(out.name + ".ckpt")
     from ..device import resolve_device
 

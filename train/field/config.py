@@ -38,6 +38,8 @@ class FitConfig:
     tv_weight: float = config_field(1e-4, "total-variation weight on the planes")
     empty_weight: float = config_field(1.0, "weight of the density penalty at random points outside the visual hull")
     seed: int = config_field(0, "random seed")
+    decoder: str = config_field(formats.DECODER_VERSION, "shared decoder version to fit for: "
+                                + ", ".join(formats.DECODERS) + " (docs/fitting.md)")
     checkpoint_every: int = config_field(250, "steps between checkpoints")
 
 
@@ -46,10 +48,15 @@ class DecoderConfig:
     """Joint training of the shared decoder over built-in scenes (spot and lego are held out)."""
 
     scenes: tuple = config_field(("procedural", "duck", "teapot", "bunny", "suzanne"), "builtin scenes trained on")
-    hidden: int = config_field(32, "decoder width")
-    steps: int = config_field(6000, "total steps, the scenes taken in turn")
-    plane_res: int = config_field(64, "R of each training scene's planes")
+    version: str = config_field(formats.DECODERS[-1], "decoder version the weights are written as")
+    hidden: int = config_field(64, "decoder width (tri-dec-1: 32)")
+    layers: int = config_field(2, "hidden layers (ReLU) before the head")
+    steps: int = config_field(15000, "total steps, the scenes (and their plane sizes) taken in turn")
+    plane_res: tuple = config_field((16, 32, 64), "R of each training scene's planes (tri-dec-1: 64 alone): one plane "
+                                    "set per scene and R, so that one decoder serves small payloads too")
     nested: tuple = config_field((4, 8, 12), "channel counts drawn each step, so that one decoder serves any C")
+    plane_noise: float = config_field(0.0, "each step adds Gaussian noise to the planes the decoder reads, its std "
+                                      "drawn uniformly in [0, this] (plane values span [-1, 1]); 0: off")
     lr: float = config_field(3e-3, "decoder Adam learning rate, decayed 10x over the run")
     size: int = config_field(200, "rendered view size of the training scenes")
     seed: int = config_field(0, "random seed")
@@ -70,6 +77,8 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
             and 0 <= cfg.min_transmittance < 1 and cfg.channel_noise >= 0):
         problems.append("--qat-fraction, --channel-fraction and --fg-fraction must be in [0, 1], "
                         "--min-transmittance in [0, 1), --channel-noise >= 0")
+    if cfg.decoder not in formats.DECODERS:
+        problems.append(f"--decoder must be one of {', '.join(formats.DECODERS)}, not {cfg.decoder!r}")
     if problems:
         raise UserError("; ".join(problems))
     return cfg

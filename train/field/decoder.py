@@ -47,12 +47,15 @@ def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None,
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
-    per_scene = math.ceil(cfg.steps / len(cfg.scenes))
-    fcfg = FitConfig(plane_res=cfg.plane_res, plane_channels=formats.C_MAX, steps=per_scene, seed=cfg.seed)
-    states = [new_state(load_scene(f"builtin:{n}", size=cfg.size), fcfg, device=device) for n in cfg.scenes]
-    dec = Decoder(hidden=cfg.hidden).to(device or "cpu")
+    runs = [(n, r) for n in cfg.scenes for r in cfg.plane_res]   # one plane set per scene and resolution
+    names = [n if len(cfg.plane_res) == 1 else f"{n}@{r}" for n, r in runs]
+    per_scene = math.ceil(cfg.steps / len(runs))
+    fcfgs = [FitConfig(plane_res=r, plane_channels=formats.C_MAX, steps=per_scene, seed=cfg.seed) for _, r in runs]
+    posed = {n: load_scene(f"builtin:{n}", size=cfg.size) for n in cfg.scenes}
+    states = [new_state(posed[n], fc, device=device) for (n, _), fc in zip(runs, fcfgs)]
+    dec = Decoder(hidden=cfg.hidden, layers=cfg.layers).to(device or "cpu")
     opt = torch.optim.Adam(dec.parameters(), lr=cfg.lr)
-    step0, t_start, hist = 0, time.perf_counter(), {n: [] for n in cfg.scenes}
+    step0, t_start, hist = 0, time.perf_counter(), {n: [] for n in names}
     if checkpoint is not None and checkpoint.is_file():
         ck = torch.load(checkpoint, weights_only=False, map_location=device or "cpu")
         if ck["cfg"] != asdict(cfg):
@@ -62,13 +65,14 @@ def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None,
             st.planes.load_state_dict(s["planes"]), st.occ.load_state_dict(s["occ"]), st.opt.load_state_dict(s["opt"])
             st.step = s["step"]
         step0, hist = ck["step"], ck["hist"]
-    for step in range(step0, per_scene * len(cfg.scenes)):
-        k = step % len(cfg.scenes)
+    for step in range(step0, per_scene * len(runs)):
+        k = step % len(runs)
         for g in opt.param_groups:
-            g["lr"] = cfg.lr * 0.1 ** (step / (per_scene * len(cfg.scenes)))
+            g["lr"] = cfg.lr * 0.1 ** (step / (per_scene * len(runs)))
         c = int(cfg.nested[int(torch.randint(len(cfg.nested), (1,), generator=gen))])
-        mse = train_step(states[k], dec, fcfg, gen, extra_params_opt=opt, channels=c)
-        hist[cfg.scenes[k]].append(mse)
+        noise = cfg.plane_noise * float(torch.rand(1, generator=gen)) if cfg.plane_noise > 0 else 0.0
+        mse = train_step(states[k], dec, fcfgs[k], gen, extra_params_opt=opt, channels=c, plane_noise=noise)
+        hist[names[k]].append(mse)
         if (step + 1) % 250 == 0:
             line = " ".join(f"{n}={-10 * math.log10(np.mean(h[-20:])):.2f}" for n, h in hist.items() if h)
             log(f"step {step + 1}: train psnr {line} ({time.perf_counter() - t_start:.0f}s)")
@@ -80,7 +84,7 @@ def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None,
                                         "opt": s.opt.state_dict(), "step": s.step} for s in states]}, tmp)
                 tmp.replace(checkpoint)
     np.savez(out, **dec.state_arrays())
-    summary = {"decoder_version": formats.DECODER_VERSION, "config": asdict(cfg),
+    summary = {"decoder_version": cfg.version, "config": asdict(cfg),
                "final_train_psnr": {n: round(-10 * math.log10(np.mean(h[-50:])), 2) for n, h in hist.items()},
                "seconds": round(time.perf_counter() - t_start, 1), "torch_threads": torch.get_num_threads()}
     out.with_suffix(".json").write_text(json.dumps(summary, indent=2))

@@ -32,8 +32,7 @@ def decode(features: Tensor, decoder: "Decoder") -> tuple[Tensor, Tensor]:
     n, _, c = features.shape
     w0 = decoder.l0.weight.view(-1, 3, formats.C_MAX)[:, :, :c].reshape(-1, 3 * c)  # unused channels read 0
     h = F.relu(F.linear(features.reshape(n, 3 * c), w0, decoder.l0.bias))
-    h = F.relu(decoder.l1(h))
-    out = decoder.l2(h)
+    out = decoder.tail(h)
     sigma = torch.exp(torch.clamp(out[:, 0], max=formats.DENSITY_CLAMP))
     return sigma, torch.sigmoid(out[:, 1:4])
 
@@ -73,21 +72,32 @@ class TriPlanes(nn.Module):
 
 
 class Decoder(nn.Module):
-    """The shared MLP 3*C_MAX -> hidden -> hidden -> (density logit, r, g, b). Weights are stored as
-    numpy arrays (`state_arrays`) so that the torch-free runtime can read them too."""
+    """The shared MLP 3*C_MAX -> hidden (`layers` hidden layers, ReLU) -> (density logit, r, g, b): linear
+    layers l0 .. l<layers>, l0 the first (linear in the plane features, which the bake exploits) and
+    l<layers> the head. `tri-dec-1` is hidden 32, layers 2. Weights are stored as numpy arrays
+    (`state_arrays`) so that the torch-free runtime can read them too."""
 
-    def __init__(self, hidden: int = 32):
+    def __init__(self, hidden: int = 32, layers: int = 2):
         super().__init__()
-        self.hidden = hidden
+        assert layers >= 1
+        self.hidden, self.layers = hidden, layers
         self.l0 = nn.Linear(3 * formats.C_MAX, hidden)
-        self.l1 = nn.Linear(hidden, hidden)
-        self.l2 = nn.Linear(hidden, 4)
+        for i in range(1, layers):
+            setattr(self, f"l{i}", nn.Linear(hidden, hidden))
+        setattr(self, f"l{layers}", nn.Linear(hidden, 4))
+
+    def tail(self, h: Tensor) -> Tensor:
+        """The layers after l0's ReLU: (N, hidden) -> (N, 4) density logit and rgb logits."""
+        for i in range(1, self.layers):
+            h = F.relu(getattr(self, f"l{i}")(h))
+        return getattr(self, f"l{self.layers}")(h)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {k: v.detach().cpu().numpy().astype(np.float32) for k, v in self.state_dict().items()}
 
     @classmethod
     def from_arrays(cls, arrays: dict) -> "Decoder":
-        dec = cls(hidden=int(arrays["l0.weight"].shape[0]))
+        layers = sum(1 for k in arrays if k.startswith("l") and k.endswith(".weight")) - 1
+        dec = cls(hidden=int(arrays["l0.weight"].shape[0]), layers=layers)
         dec.load_state_dict({k: torch.from_numpy(np.asarray(arrays[k])) for k in dec.state_dict()})
         return dec

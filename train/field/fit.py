@@ -111,9 +111,11 @@ def lr_at(cfg: FitConfig, step: int) -> float:
 
 
 def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extra_params_opt=None,
-               channels: int | None = None) -> float:
+               channels: int | None = None, plane_noise: float = 0.0) -> float:
     """One step on a batch of rays; updates planes (and the decoder when `extra_params_opt` is given).
-    `channels` < C zeroes the trailing plane channels (nested channels while training the decoder)."""
+    `channels` < C zeroes the trailing plane channels (nested channels while training the decoder);
+    `plane_noise` > 0 adds Gaussian noise of that std to the planes the decoder reads (robustness to
+    what a medium restores)."""
     t0 = time.perf_counter()
     for g in st.opt.param_groups:
         g["lr"] = lr_at(cfg, st.step)
@@ -126,6 +128,8 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
         planes = straight_through_8bit(planes)
     if channels is not None and channels < planes.shape[1]:
         planes = planes[:, :channels]
+    if plane_noise > 0:
+        planes = planes + plane_noise * torch.randn(planes.shape, generator=gen).to(planes.device)
     occ = st.occ.occ if cfg.occupancy else None
     color, _, n_samples = render_rays(planes, decoder, st.frame, occ, o, d, jitter=True, generator=gen,
                                       min_transmittance=cfg.min_transmittance)

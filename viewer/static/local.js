@@ -69,7 +69,7 @@ const S3DLocal = (() => {
     const f = {};
     for (const p of parts.slice(2)) { const [k, v] = p.split("="); f[k] = v.split(",").map(Number); }
     return { version: Number(parts[0].slice(3)), codec: parts[1], box: f.b, orbit: f.o, target: f.t,
-             planes: f.p, strength: f.s ? f.s[0] : 1 };
+             planes: f.p, strength: f.s ? f.s[0] : 1, decoder: `tri-dec-${f.d ? f.d[0] : 1}` };
   }
 
   // (GRID, R) spread matrix U and its pseudo-inverse P = (U^T U)^-1 U^T (R, GRID), float64 row-major
@@ -216,18 +216,20 @@ const S3DLocal = (() => {
     return cells;
   }
 
-  let sessions = null;
-  async function models() {
-    if (!sessions) {
+  // the restore graph, and the project and field graphs of the decoder the scene was fitted for (a
+  // snapshot names it in its metadata's d= field; none: tri-dec-1)
+  const sessions = {};
+  async function models(decoder) {
+    if (!sessions[decoder]) {
       const ort = window.ort;
       ort.env.wasm.wasmPaths = "/static/vendor/onnxruntime-web/";
       ort.env.wasm.numThreads = 1;
       const opt = { executionProviders: ["wasm"] };
-      const [restore, project, field] = await Promise.all(["restore", "project", "field"].map(
+      const [restore, project, field] = await Promise.all(["restore", `project-${decoder}`, `field-${decoder}`].map(
         (k) => ort.InferenceSession.create(`/v1/models/${k}.onnx`, opt)));
-      sessions = { restore, project, field };
+      sessions[decoder] = { restore, project, field };
     }
-    return sessions;
+    return sessions[decoder];
   }
 
   // a snapshot file this page can decode by itself: a PNG with its metadata line, file medium, at 1 to
@@ -253,7 +255,7 @@ const S3DLocal = (() => {
     ctx.drawImage(bitmap, 0, 0);
     const x = squareMeans(ctx.getImageData(0, 0, k * SIZE, k * SIZE, { colorSpace: "srgb" }).data, k);
     progress("Loading the models…");
-    const s = await models();
+    const s = await models(meta.decoder);
     const t1 = performance.now();
     progress("Restoring the planes…");
     const secret = (await s.restore.run({ snapshot: new window.ort.Tensor("float32", x, [1, 3, SIZE, SIZE]) })).secret.data;

@@ -1,0 +1,234 @@
+"""What a fit reads of a capture besides its files: the held-out split, the world box, the up axis, the image
+size limit; and the one line that says what was read (`describe`). numpy + OpenCV, no torch."""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+from . import validate
+from .carve import carve, tight_box
+from .errors import UserError
+from .posed import PosedImages
+
+__all__ = ["CaptureOptions", "parse_box", "parse_up", "up_rotation", "split", "shrink", "describe", "assemble",
+           "builtin_options", "fit_box", "box_from_cameras"]
+
+DEFAULT_BOX = np.array([[-1.5, -1.5, -1.5], [1.5, 1.5, 1.5]], np.float32)  # NeRF-Synthetic convention
+
+
+@dataclass(frozen=True)
+class CaptureOptions:
+    """How a capture is read (fit's --holdout, --box, --up, --max-size); None: the layout's default."""
+
+    holdout: int | None = None
+    """every N-th frame (0, N, 2N, ...) is held out for field_psnr; 0: none (the training frames are scored);
+    None: the layout's own split (Blender: its test split; nerfstudio, COLMAP: every 8th)"""
+    box: tuple | None = None
+    """(x0, y0, z0, x1, y1, z1) world box, in the world after the up rotation; None: from masks or cameras"""
+    up: object = None
+    """"auto" (the mean of the cameras' up vectors), an (x, y, z) vector, or None: the layout's default
+    (Blender, builtin: as given; nerfstudio, COLMAP: auto). The world is rotated so that it becomes +z."""
+    max_size: int | None = None
+    """longest image side in pixels after --downscale (images are shrunk to it); None: no limit"""
+
+
+def _floats(text: str, n: int, flag: str) -> tuple:
+    try:
+        vals = tuple(float(v) for v in str(text).replace(" ", "").split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != n or not all(np.isfinite(vals)):
+        raise UserError(f"{flag} takes {n} numbers separated by commas, not {validate.show(text)}")
+    return vals
+
+
+def parse_box(text: str | None) -> tuple | None:
+    """`--box x0,y0,z0,x1,y1,z1` -> six floats (checked as a scene box), or None."""
+    if text is None:
+        return None
+    return tuple(validate.check_box(_floats(text, 6, "--box"), "--box").reshape(-1).tolist())
+
+
+def parse_up(text: str | None):
+    """`--up auto` or `--up x,y,z` -> "auto", a unit (x, y, z) tuple, or None."""
+    if text is None or text == "auto":
+        return text
+    v = np.array(_floats(text, 3, "--up"))
+    if np.linalg.norm(v) < 1e-9:
+        raise UserError("--up must not be the zero vector")
+    return tuple((v / np.linalg.norm(v)).tolist())
+
+
+def check_holdout(n, field: str = "--holdout") -> int:
+    """--holdout N checked: 0 (none held out) or N >= 2."""
+    n = validate.integer(n, field, 0, 1 << 20)
+    if n == 1:
+        raise UserError(f"{field} 1 would hold out every frame: give 0 (none) or N >= 2")
+    return n
+
+
+def up_rotation(c2w: np.ndarray, up) -> tuple[np.ndarray, np.ndarray]:
+    """(R (3, 3), up (3,)): the smallest rotation taking the world axis `up` ("auto": the mean of the cameras'
+    up vectors, c2w[:, :3, 1] in OpenGL axes; or an (x, y, z) vector) to +z."""
+    if isinstance(up, str):
+        m = c2w[:, :3, 1].astype(np.float64).mean(0)
+        if np.linalg.norm(m) < 1e-3:
+            raise UserError("--up auto: the cameras' up vectors cancel out (no common up); give --up x,y,z")
+    else:
+        m = np.asarray(up, np.float64)
+    u = m / np.linalg.norm(m)
+    z = np.array([0.0, 0.0, 1.0])
+    v, c = np.cross(u, z), float(u @ z)
+    s = np.linalg.norm(v)
+    if s < 1e-12:
+        return (np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])), u
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx * ((1 - c) / s**2), u
+
+
+def split(n: int, holdout: int) -> tuple[np.ndarray, np.ndarray]:
+    """(train, test) indices: every `holdout`-th frame from 0 held out; holdout 0: test = train = all."""
+    if holdout == 0:
+        return np.arange(n), np.arange(n)
+    test = np.arange(0, n, holdout)
+    train = np.setdiff1d(np.arange(n), test)
+    if len(train) < 2:
+        raise UserError(f"--holdout {holdout} leaves {len(train)} of {n} frames to train on (2 or more needed)")
+    return train, test
+
+
+def shrink(rgb: np.ndarray, alpha, downscale: int, max_size: int | None, where: str):
+    """Divide the size by `downscale`, then shrink (area) so that the longer side is at most `max_size`.
+    rgb (H, W, 3), alpha (H, W) or None -> (rgb, alpha, sx, sy): the new over the old width and height, by
+    which fx and cx (sx), fy and cy (sy) scale."""
+    h, w = rgb.shape[:2]
+    nw, nh = w // downscale, h // downscale
+    if min(nw, nh) < 1:
+        raise UserError(f"{where}: --downscale {downscale} leaves nothing of a {w}x{h} image")
+    if max_size and max(nw, nh) > max_size:
+        f = max_size / max(nw, nh)
+        nw, nh = max(1, round(nw * f)), max(1, round(nh * f))
+    if (nw, nh) == (w, h):
+        return rgb, alpha, 1.0, 1.0
+    rgb = cv2.resize(np.ascontiguousarray(rgb), (nw, nh), interpolation=cv2.INTER_AREA)
+    alpha = None if alpha is None else cv2.resize(np.ascontiguousarray(alpha), (nw, nh), interpolation=cv2.INTER_AREA)
+    return rgb, alpha, nw / w, nh / h
+
+
+def _vec(v) -> str:
+    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+
+
+def describe(info: dict) -> str:
+    """One line from a loader's `info["capture"]`: frames read and skipped (why), the split, the image size,
+    the box and the up axis."""
+    c = info
+    skipped = sum(c["skipped"].values())
+    why = ", ".join(f"{n} {reason}" for reason, n in c["skipped"].items() if n)
+    parts = [f"read {c['frames']} frames" + (f", skipped {skipped} ({why})" if skipped else "")]
+    if c["holdout"] == 0:
+        parts.append(f"{c['train']} train, none held out: field_psnr is scored on the training frames")
+    else:
+        parts.append(f"{c['train']} train / {c['test']} held out ({c['split']})")
+    parts.append(f"images {c['size'][0]}x{c['size'][1]}")
+    parts.append(f"box {_vec(c['box'][0])}..{_vec(c['box'][1])} ({c['box_from']})")
+    parts.append(f"up {_vec(c['up'])} ({c['up_from']})")
+    return f"{c['name']}: " + "; ".join(parts)
+
+
+def fit_box(images_alpha, c2w, intrinsics, start_box=DEFAULT_BOX, min_views: int = 2) -> np.ndarray:
+    """A tight box from coverage masks (visual hull of the voxels at least `min_views` views hold in their
+    frame), or `start_box` when there are no masks."""
+    if images_alpha is None:
+        return start_box.astype(np.float32)
+    occ = carve(images_alpha, c2w, intrinsics, start_box, 64, min_views=min_views)
+    return tight_box(occ, start_box)
+
+
+def assemble(frames: list, opts: CaptureOptions, *, where: str, name: str, layout: str, default_up, default_split,
+              skipped: dict, box_start) -> PosedImages:
+    """Frames (rgb (H, W, 3), alpha (H, W) or None, c2w (4, 4) OpenGL, (fx, fy, cx, cy)) -> PosedImages: the
+    world turned so that the up axis is +z, the held-out split, the box (`opts.box`; else carved from the masks
+    inside `box_start(c2w, 2)`, or inside DEFAULT_BOX when box_start is None; else `box_start(c2w)`), and
+    `info["capture"]`.
+    default_split: N (every N-th held out) or (train, test, how)."""
+    why = ", ".join(f"{n} {r}" for r, n in skipped.items() if n) or "none skipped"
+    if len(frames) < 2:
+        raise UserError(f"{where}: fewer than 2 images found ({why})")
+    sizes = sorted({f[0].shape[1::-1] for f in frames})
+    if len(sizes) > 1:
+        raise UserError(f"{where}: images differ in size ({', '.join(f'{w}x{h}' for w, h in sizes[:3])}); resize "
+                        "them to one size first")
+    c2w = np.stack([f[2] for f in frames]).astype(np.float64)
+    intr = np.asarray([f[3] for f in frames], np.float32)
+    alphas = [f[1] for f in frames]
+    alpha = None if any(a is None for a in alphas) else np.stack(alphas).astype(np.float32)
+    up = opts.up if opts.up is not None else default_up
+    up_vec, up_from = (0.0, 0.0, 1.0), "as given"
+    if up is not None:
+        rot, up_vec = up_rotation(c2w, up)
+        c2w[:, :3, :] = np.einsum("ij,njk->nik", rot, c2w[:, :3, :])
+        up_from = ("auto: the cameras' mean up" if isinstance(up, str) else "--up") + ", turned to +z"
+    c2w = c2w.astype(np.float32)
+    n = len(frames)
+    holdout = opts.holdout if opts.holdout is not None else default_split if isinstance(default_split, int) else None
+    if holdout is not None:
+        train, test = split(n, holdout)
+        how = f"every {holdout}-th frame" if holdout else "none held out"
+    else:
+        train, test, how = default_split
+    if opts.box is not None:
+        box, box_from = validate.check_box(opts.box, "--box"), "--box"
+    elif box_start is None:   # Blender: carved inside the NeRF-Synthetic box
+        box = fit_box(alpha, c2w, intr)
+        box_from = "carved from the masks" if alpha is not None else "the NeRF-Synthetic default"
+    elif alpha is not None:
+        # carved inside a cube twice the cameras' own, then again inside what is left. An object is in the frame
+        # of most views of its capture; what half the views do not hold is the few views' long visual-hull spikes
+        views = max(2, (n + 1) // 2)
+        box = fit_box(alpha, c2w, intr, fit_box(alpha, c2w, intr, box_start(c2w, 2.0), views), views)
+        box_from = "carved from the masks"
+    else:
+        box, box_from = box_start(c2w), "from the cameras"
+    box = validate.check_box(box, f"{where}: the scene box found")
+    info = {"name": name, "frames": n, "skipped": skipped, "holdout": holdout, "train": len(train),
+            "test": 0 if holdout == 0 else len(test), "split": how, "size": list(frames[0][0].shape[1::-1]),
+            "box": box.tolist(), "box_from": box_from, "up": [float(x) for x in up_vec], "up_from": up_from}
+    return PosedImages(images=np.stack([f[0] for f in frames]).astype(np.float32), alpha=alpha, c2w=c2w,
+                       intrinsics=intr, box=box, train=np.asarray(train), test=np.asarray(test), name=name,
+                       skipped=int(sum(skipped.values())), info={"layout": layout, "capture": info})
+
+
+def builtin_options(posed: PosedImages, opts: CaptureOptions) -> PosedImages:
+    """A builtin scene with --up (its box turned with it), --holdout and --box applied; `info["capture"]`."""
+    c2w, box = posed.c2w.astype(np.float64), posed.box
+    up_vec, up_from = (0.0, 0.0, 1.0), "as given"
+    if opts.up is not None:
+        rot, up_vec = up_rotation(c2w, opts.up)
+        c2w[:, :3, :] = np.einsum("ij,njk->nik", rot, c2w[:, :3, :])
+        corners = np.stack(np.meshgrid(*box.T, indexing="ij"), -1).reshape(-1, 3) @ rot.T
+        box = np.stack([corners.min(0), corners.max(0)])
+        up_from = ("auto: the cameras' mean up" if isinstance(opts.up, str) else "--up") + ", turned to +z"
+    train, test, how = posed.train, posed.test, "the builtin test views"
+    if opts.holdout is not None:
+        train, test = split(len(c2w), opts.holdout)
+        how = f"every {opts.holdout}-th frame" if opts.holdout else "none held out"
+    box, box_from = (validate.check_box(opts.box, "--box"), "--box") if opts.box is not None else \
+        (box.astype(np.float32), "the mesh's bounds")
+    info = {"name": posed.name, "frames": len(c2w), "skipped": {}, "holdout": opts.holdout, "train": len(train),
+            "test": 0 if opts.holdout == 0 else len(test), "split": how, "size": [posed.width, posed.height],
+            "box": box.tolist(), "box_from": box_from, "up": [float(x) for x in up_vec], "up_from": up_from}
+    return replace(posed, c2w=c2w.astype(np.float32), box=box, train=np.asarray(train), test=np.asarray(test),
+                   info={**posed.info, "capture": info})
+
+
+def box_from_cameras(c2w: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Cube around the point closest to all optical axes, `scale` times half the median camera distance wide."""
+    o, d = c2w[:, :3, 3].astype(np.float64), -c2w[:, :3, 2].astype(np.float64)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    proj = np.eye(3)[None] - d[:, :, None] * d[:, None, :]
+    centre = np.linalg.lstsq(proj.sum(0), np.einsum("nij,nj->i", proj, o), rcond=None)[0]
+    half = 0.5 * scale * np.median(np.linalg.norm(o - centre, axis=1))
+    return np.stack([centre - half, centre + half]).astype(np.float32)
