@@ -133,7 +133,8 @@ def bench_fit_channel_command(args) -> int:
     torch.set_num_threads(max(1, args.threads))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    posed = load_scene(args.scene, size=args.size)
+    builtin = args.scene.startswith("builtin:")
+    posed = load_scene(args.scene, size=args.size) if builtin else load_scene(args.scene, downscale=args.downscale)
     decoder = load_decoder()
     for p in decoder.parameters():
         p.requires_grad_(False)
@@ -150,7 +151,7 @@ def bench_fit_channel_command(args) -> int:
         codes, seconds = _finish(st0, gen0, decoder, cfg, frac, noise, gain)
         ev = evaluate_planes(dequantize_planes(codes), decoder, posed)
         scene = Scene(codes=codes, box=posed.box, orbit=_default_orbit(posed), name=posed.name,
-                      meta={"source": args.scene, "size": args.size})
+                      meta={"source": args.scene, **({"size": args.size} if builtin else {"downscale": args.downscale})})
         paths[name] = str(out / f"fit_channel-{posed.name}-{name}.s3d")
         save_scene(scene, paths[name])
         fits[name] = {"channel_fraction": frac, "channel_noise": noise, "gain": gain, "field_psnr": round(ev["field_psnr"], 3),

@@ -133,3 +133,22 @@ def test_export_and_make_example_need_a_destination(tmp_path):
         assert proc.returncode == 2 and "one of the arguments -o/--output --install is required" in proc.stderr
         proc = run(cmd, "-o", str(tmp_path / "x"), "--install")
         assert proc.returncode == 2 and "not allowed with argument" in proc.stderr
+
+
+def test_plain_fit_says_what_to_run_for_a_print_and_fits_for_the_decoder_asked(tmp_path):
+    """Plain `fit` writes 64x8 planes, more than a print carries well: one line says what to run instead (a
+    snapshot is printed unless embedded as a file). `--decoder tri-dec-2` writes a scene of that decoder; an
+    unknown decoder is refused in one line."""
+    from snapshot3d.scene import load_scene_file
+    proc = run("fit", "builtin:procedural", "-o", str(tmp_path / "a.s3d"), "--size", "32", "--steps", "3",
+               "--occ-warmup", "1")
+    assert proc.returncode == 0, proc.stderr
+    hints = [ln for ln in proc.stdout.splitlines() if ln.startswith("hint:")]
+    assert len(hints) == 1 and "64x8 planes" in hints[0] and "--budget auto --medium print" in hints[0], proc.stdout
+    assert load_scene_file(tmp_path / "a.s3d").decoder_version == formats.DECODER_VERSION
+    proc = run("fit", "builtin:procedural", "-o", str(tmp_path / "b.s3d"), "--size", "32", "--steps", "3",
+               "--occ-warmup", "1", "--plane-res", "16", "--plane-channels", "4", "--decoder", "tri-dec-2")
+    assert proc.returncode == 0, proc.stderr
+    assert "hint:" not in proc.stdout and load_scene_file(tmp_path / "b.s3d").decoder_version == "tri-dec-2"
+    _assert_one_line_error(run("fit", "builtin:procedural", "-o", str(tmp_path / "c.s3d"), "--decoder", "tri-dec-9"),
+                           "--decoder must be one of tri-dec-1, tri-dec-2")

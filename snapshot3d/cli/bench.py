@@ -132,7 +132,9 @@ def add_commands(sub) -> None:
                                   "rounding only (paired, one shared prefix): field_psnr, and e2e_psnr through "
                                   "simulated prints", _run("snapshot3d.bench.fit_channel", "bench_fit_channel_command"))
     _out(bf)
-    bf.add_argument("--scene", default="builtin:spot", help="builtin scene to fit")
+    bf.add_argument("--scene", default="builtin:spot", help="scene to fit: builtin:NAME or posed images (a Blender "
+                                                           "folder such as ../shared/data/scenes/lego_subset)")
+    bf.add_argument("--downscale", type=int, default=4, help="posed images from files: divide their size by this")
     bf.add_argument("--plane-res", type=int, default=16, help="R of the planes (the print budget's choice for spot)")
     bf.add_argument("--plane-channels", type=int, default=4, help="C of the planes")
     bf.add_argument("--steps", type=int, default=1500, help="fit steps")

@@ -16,7 +16,8 @@ from snapshot3d.options import config_from_args
 from snapshot3d.reports import write_json
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.qr import scene_meta
-from snapshot3d.scene import Scene, load_scene_file
+from snapshot3d.scene import load_scene_file
+from snapshot3d.train.field.curves import payload_hint  # embed's one-line hint (also fit's)
 
 from .embedding import STRENGTHS, check_planes_for, snapshot_for, strength_for
 
@@ -65,27 +66,6 @@ def embed_command(args) -> int:
     if (hint := payload_hint(args.medium, scene)) is not None:
         print(hint)
     return 0
-
-
-def payload_hint(medium: str, scene: Scene, margin_db: float = 3.0) -> str | None:
-    """One line for a print snapshot of planes too large for a photo to carry: the print codec's curve
-    (`snapshot3d/assets/budget-curves.json`, `moderate` photos) puts their restore more than `margin_db` below
-    its best payload, more than a larger field can win back (plain `fit` writes 64x8: 21.9 dB against 27.9 at
-    16x4). None otherwise, and for the file medium, whose curve is flat within 1.5 dB."""
-    from snapshot3d.paths import asset
-    from snapshot3d.train.field.budget import CURVES_FILE, codec_psnr
-
-    path = asset(CURVES_FILE)
-    points = json.loads(path.read_text()).get(medium, {}).get("points", []) if path.is_file() else []
-    if medium != "print" or not points:
-        return None
-    here = codec_psnr(medium, int(scene.codes.size))
-    best_values, best_db = max(points, key=lambda p: p[1])
-    if here >= best_db - margin_db:
-        return None
-    return (f"hint: {scene.resolution}x{scene.channels} planes are more than a print carries well (about {here:.1f} "
-            f"dB restored from a moderate photo, against {best_db:.1f} at {best_values} plane values); fit with "
-            f"'--budget auto --medium print' for the plane size with the best views after printing")
 
 
 def _finish_training(out: Path, summary: dict, t0: float) -> None:

@@ -28,8 +28,7 @@ from snapshot3d.posed import PosedImages
 from snapshot3d.scene import dequantize_planes
 
 from .config import LADDER, LADDER_PRINT, FitConfig
-from .curves import CURVES_FILE, PREDICT_HOSTS, print_channel
-from .curves import codec_curves as _curves
+from .curves import CURVES_FILE, PREDICT_HOSTS, codec_psnr, print_channel
 from .evaluate import evaluate_planes
 from .fit import fit, hull_grid
 
@@ -59,18 +58,6 @@ def codec_share(field_psnr: float, e2e_psnr: float) -> float:
 def ladder_for(medium: str | None):
     """The plane sizes a medium's ladder tries (None: the fixed-budget ladder of the field alone)."""
     return LADDER_PRINT if medium == "print" else LADDER
-
-
-def codec_psnr(medium: str, values: int) -> float:
-    """The restore_psnr the medium's codec gives a payload of `values` plane values, interpolated in
-    log(values) on the codec bench's curve (clamped to its ends)."""
-    from snapshot3d.errors import UserError
-
-    curves, path = _curves()
-    if medium not in curves:
-        raise UserError(f"no codec curve for medium {medium!r} in {path}; run 'snapshot3d bench codec --medium {medium}'")
-    pts = sorted(curves[medium]["points"])
-    return float(np.interp(np.log(values), np.log([p[0] for p in pts]), [p[1] for p in pts]))
 
 
 def expected_e2e(field_psnr: float, codec_db: float) -> float:

@@ -20,6 +20,7 @@ from snapshot3d.scene import Orbit, Scene, load_scene_file, save_scene
 from snapshot3d.validate import MESH_RES, SCENE_MAX_RES, VIEW_SIZE, check_views, integer
 
 from .config import FitConfig, check_fit_config
+from .curves import payload_hint
 
 __all__ = ["fit_scene", "fit_command", "render_command", "mesh_command", "train_decoder_command", "orbit_cameras",
            "render_scene"]
@@ -135,6 +136,8 @@ def fit_command(args) -> int:
     extra = f", {throughput['rays_per_s']:.0f} rays/s" if throughput else ""
     print(f"wrote {out}: field_psnr {report['field_psnr']:.2f} dB, field_ssim {report['field_ssim']:.3f}, "
           f"{report['scene_kb']:.1f} kB (R={scene.resolution}, C={scene.channels}), {report['fit_seconds']:.0f} s{extra}")
+    if args.medium is None and (hint := payload_hint(formats.DEFAULT_MEDIUM, scene)) is not None:
+        print(f"{hint} (embed makes a print unless given --medium file)")   # what plain fit, then embed, would lose
     return 0
 
 
