@@ -123,13 +123,15 @@ def decode_payload(text: str) -> SheetMeta:
                      decoder)
 
 
-def check_meta(meta: SheetMeta, where: str = "the snapshot's metadata", require_codec: bool = True) -> SheetMeta:
+def check_meta(meta: SheetMeta, where: str = "the snapshot's metadata", require_codec: bool = True,
+               chart: bool = False) -> SheetMeta:
     """UserError (one line, naming the field and its allowed range) unless every field of `meta` is usable:
     a sheet format and codec this build reads (`check_codec`; without `require_codec` an unknown one is left
     to the caller), a plane size the codec carries, a box, orbit and target within `snapshot3d.validate`'s
-    bounds, a strength in its range. Fields that are None are not required here. Returns `meta`."""
+    bounds, a strength in its range. Fields that are None are not required here. `chart`: the calibration
+    chart's codec passes (`check_codec`). Returns `meta`."""
     if require_codec:
-        check_codec(meta)
+        check_codec(meta, chart)
     if meta.planes is not None and meta.codec in CODEC_MEDIUM:
         from snapshot3d.codecs.media import medium_of
 
@@ -179,12 +181,17 @@ def read_qr(gray: np.ndarray) -> str | None:
     return None
 
 
-def check_codec(meta: SheetMeta) -> None:
-    """UserError when the snapshot was made for another sheet format or a codec this build does not have."""
+def check_codec(meta: SheetMeta, chart: bool = False) -> None:
+    """UserError when the snapshot was made for another sheet format or a codec this build does not have.
+    The calibration chart's codec id (`formats.CALIB_CODEC`) passes only with `chart` (`snapshot3d calibrate`
+    scans the chart as `scan` scans a sheet); elsewhere it is refused with a line naming `calibrate`."""
     if meta.version != formats.SHEET_FORMAT_VERSION:
         raise UserError(f"sheet format version {meta.version} is not supported (this build reads "
                         f"version {formats.SHEET_FORMAT_VERSION})")
-    if meta.codec not in CODEC_MEDIUM:
+    if meta.codec == formats.CALIB_CODEC and not chart:
+        raise UserError("this is a snapshot3d calibration chart, not a snapshot: measure the printer and phone with "
+                        "'snapshot3d calibrate PHOTO'")
+    if meta.codec not in CODEC_MEDIUM and not (meta.codec == formats.CALIB_CODEC and chart):
         known = ", ".join(f"{c} ({m})" for c, m in CODEC_MEDIUM.items())
         raise UserError(f"unknown codec id {validate.show(meta.codec)} in the snapshot's metadata or QR code: this build decodes "
                         f"{known}")

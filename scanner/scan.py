@@ -96,8 +96,9 @@ def _why_not_found(found: dict, gray: np.ndarray) -> str:
     return "no snapshot3d sheet found in the photo (none of its ArUco markers is visible)"
 
 
-def scan_image(img: np.ndarray) -> ScanResult:
-    """Scan an (H, W, 3) uint8 **BGR** photo. Raises UserError with the cause when it cannot."""
+def scan_image(img: np.ndarray, chart: bool = False) -> ScanResult:
+    """Scan an (H, W, 3) uint8 **BGR** photo. Raises UserError with the cause when it cannot. `chart`: the
+    sheet may be the calibration chart (`snapshot3d calibrate`), whose QR code is refused otherwise."""
     if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
         raise ValueError(f"expected (H, W, 3) uint8 BGR, got {img.shape} {img.dtype}")
     t = {}
@@ -175,7 +176,7 @@ def scan_image(img: np.ndarray) -> ScanResult:
     pilot = pilot_psnr(lo, model, mids)
     t["colour"] = (time.perf_counter() - t1) * 1e3
     t1 = time.perf_counter()
-    qr = _read_qr(hi, model)
+    qr = _read_qr(hi, model, chart)
     t["qr"] = (time.perf_counter() - t1) * 1e3
     t["total"] = (time.perf_counter() - t0) * 1e3
     rms_snap = fit.rms_px / photo_px_per_unit(fit)
@@ -194,7 +195,7 @@ def _halve(x: np.ndarray) -> np.ndarray:
     return (x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2]) * 0.25
 
 
-def _read_qr(hi: np.ndarray, model: dict) -> dict | None:
+def _read_qr(hi: np.ndarray, model: dict, chart: bool = False) -> dict | None:
     """Read the QR from the rectified sheet (OVERSAMPLE px per unit); UserError on a wrong codec id."""
     sx0, sy0 = formats.SHEET_BOX[:2]
     qx0, qy0, qx1, qy1 = formats.QR_BOX
@@ -224,7 +225,7 @@ def _read_qr(hi: np.ndarray, model: dict) -> dict | None:
         meta = decode_payload(text)
     except ValueError as e:
         raise UserError(f"the QR code on the sheet is not a snapshot3d code ({e})") from None
-    return check_meta(meta, "the sheet's QR code").as_dict()
+    return check_meta(meta, "the sheet's QR code", chart=chart).as_dict()
 
 
 def refuse_snapshot_file(path, img: np.ndarray) -> None:

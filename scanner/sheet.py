@@ -21,7 +21,7 @@ from . import layout
 from .imageio_safe import read_image_bgr, write_atomic
 from .qr import SheetMeta, encode_payload, qr_matrix, scene_meta
 
-__all__ = ["SheetConfig", "render_sheet", "sheet_command", "write_print_files"]
+__all__ = ["SheetConfig", "render_sheet", "chart_sheet", "sheet_command", "write_print_files"]
 
 
 @dataclass(frozen=True)
@@ -70,6 +70,15 @@ def render_sheet(snapshot: np.ndarray, meta: SheetMeta, k: int) -> np.ndarray:
     return sheet
 
 
+def chart_sheet(k: int, caption: bool = True) -> np.ndarray:
+    """The calibration chart's sheet (`scanner.chart`) at k dots per snapshot pixel: (H, W, 3) uint8 RGB, its
+    QR code naming `formats.CALIB_CODEC`, with the caption on the page unless `caption` is False."""
+    from .chart import chart_meta, chart_snapshot, draw_caption
+
+    sheet = render_sheet(chart_snapshot(), chart_meta(), k)
+    return draw_caption(sheet, k) if caption else sheet
+
+
 def _png_bytes(rgb: np.ndarray, width_mm: float) -> bytes:
     """PNG carrying the dpi that prints it `width_mm` wide."""
     from PIL import Image
@@ -94,13 +103,23 @@ def write_print_files(path: Path, rgb: np.ndarray, width_mm: float) -> list[Path
 
 
 def sheet_command(args) -> int:
-    """`snapshot3d sheet SNAPSHOT -o OUT [--width-mm --dpi --scene]`."""
+    """`snapshot3d sheet SNAPSHOT -o OUT [--width-mm --dpi --scene]`, or `sheet --calibration -o OUT`."""
     cfg = SheetConfig(width_mm=args.width_mm, dpi=args.dpi)
     if not (10 <= cfg.width_mm <= 2000) or not (50 <= cfg.dpi <= 4800):
         raise UserError("--width-mm must be in [10, 2000] and --dpi in [50, 4800]")
     out = Path(args.output)
     if out.suffix.lower() not in (".png", ".pdf"):
         raise UserError(f"cannot write {out.name}: the sheet is written as .png or .pdf")
+    if getattr(args, "calibration", False):
+        if args.snapshot or args.scene:
+            raise UserError("--calibration writes the calibration chart: give no snapshot or --scene with it")
+        k = cfg.dots_per_pixel()
+        files = write_print_files(out, chart_sheet(k), cfg.width_mm)
+        print(f"wrote {' and '.join(str(f) for f in files)} (calibration chart, {cfg.width_mm:g} mm wide; print it at "
+              f"100% and run 'snapshot3d calibrate PHOTO' on a photo of it)")
+        return 0
+    if not args.snapshot:
+        raise UserError("give the snapshot to lay out (or --calibration for the calibration chart)")
     from .snapfile import snapshot_pixels
 
     snap = snapshot_pixels(cv2.cvtColor(read_image_bgr(args.snapshot, "snapshot"), cv2.COLOR_BGR2RGB))

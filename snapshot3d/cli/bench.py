@@ -266,3 +266,14 @@ def add_commands(sub) -> None:
                          "--repeats decodes, and cProfile's top functions (decode_profile.{json,txt})")
     _quick(bd, seeds=2, repeats=1, calib_seeds=1, calib_scenes="bench/models/spot-print.s3d",
            calibration_dir="bench/results/quick")
+
+    bc = add(bsub, "calibrate", "calibrate on simulated photos of the chart: MTF50, gain and nearest preset against "
+                                "the simulator's own values (issue 38 targets)",
+             _run("snapshot3d.bench.calibrate", "bench_calibrate_command"))
+    _out(bc)
+    bc.add_argument("--seeds", type=int, default=6, help="photos per physical preset")
+    bc.add_argument("--pilots", action="store_true", help="also compare the gain with the print codec's pilots "
+                                                          "on a print snapshot photographed with the same seed")
+    bc.add_argument("--reference", action="store_true", help="print the presets' reference table "
+                                                             "(scanner.calibrate.PRESET_REFERENCE) from seeds 100-111")
+    _quick(bc, seeds=1)

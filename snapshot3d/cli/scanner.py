@@ -10,16 +10,20 @@ __all__ = ["add_commands"]
 
 
 def add_commands(sub) -> None:
-    """Add sheet, simulate and scan to the top-level subparsers `sub`."""
+    """Add sheet, simulate, scan and calibrate to the top-level subparsers `sub`."""
     s = _add(sub, "sheet", "lay out a snapshot as a printable sheet (markers, colour patches, QR code)",
             _run("snapshot3d.scanner.sheet", "sheet_command"))
-    s.add_argument("snapshot", help="380x380 snapshot (.png from `snapshot3d embed`, which carries its metadata)")
+    s.add_argument("snapshot", nargs="?", help="380x380 snapshot (.png from `snapshot3d embed`, which carries its "
+                                               "metadata); not with --calibration")
     s.add_argument("-o", "--output", required=True,
                    help="sheet to write: .pdf (the PNG of the same page is written beside it) or .png")
     s.add_argument("--width-mm", type=float, default=100.0, help="printed width of the whole sheet in millimetres")
     s.add_argument("--dpi", type=float, default=300.0, help="printer resolution in dots per inch")
     s.add_argument("--scene", help="scene file (.s3d) whose box and orbit go into the QR code (a snapshot from "
                                    "`embed` carries them already)")
+    s.add_argument("--calibration", action="store_true",
+                   help="write the calibration chart instead of a snapshot's sheet (photograph its print and run "
+                        "`snapshot3d calibrate`)")
 
     m = _add(sub, "simulate", "photograph a printed sheet through a simulated printer, scene and phone camera",
             _run("snapshot3d.scanner.commands", "simulate_command"))
@@ -38,3 +42,9 @@ def add_commands(sub) -> None:
     c.add_argument("--debug", help="write an overlay of the detections on the photo here (.png or .jpg)")
     c.add_argument("--report", help="write a JSON report here (detected, corners, reprojection_px, confidence, "
                                     "qr, timings_ms)")
+
+    k = _add(sub, "calibrate", "measure a printer and phone from a photo of the calibration chart (numpy + OpenCV)",
+             _run("snapshot3d.scanner.calibrate", "calibrate_command"))
+    k.add_argument("photo", help="photo of the printed chart from `snapshot3d sheet --calibration` (JPEG or PNG)")
+    k.add_argument("-o", "--output", help="write the channel profile here (.json)")
+    k.add_argument("--report", help="write a JSON report here (the profile, the photo's name, timings_ms)")

@@ -1,0 +1,119 @@
+"""The calibration chart and `snapshot3d calibrate` (issue 38 items 1-2): round trips through each physical
+preset, photos without the chart, the chart refused by decode, and channel profiles of another version."""
+import json
+
+import cv2
+import numpy as np
+import pytest
+from helpers import assert_one_line_error, run_cli
+
+from snapshot3d.errors import UserError
+from snapshot3d.scanner.calibrate import PROFILE_VERSION, calibrate_image, load_profile
+from snapshot3d.scanner.chart import chart_snapshot
+from snapshot3d.scanner.chart_measure import measure_chart
+from snapshot3d.scanner.sheet import chart_sheet
+
+
+@pytest.fixture(scope="module")
+def chart_photo(tmp_path_factory):
+    """A lossless photo (severity none) of the chart's sheet written by the CLI, and its folder."""
+    d = tmp_path_factory.mktemp("chart")
+    r = run_cli("sheet", "--calibration", "-o", str(d / "chart.pdf"))
+    assert r.returncode == 0, r.stderr
+    assert (d / "chart.pdf").read_bytes()[:5] == b"%PDF-" and (d / "chart.png").is_file()
+    r = run_cli("simulate", str(d / "chart.pdf"), "-o", str(d / "photo.png"), "--severity", "none")
+    assert r.returncode == 0, r.stderr
+    return d
+
+
+def test_chart_is_deterministic_and_measures_itself_exactly():
+    a, b = chart_snapshot(), chart_snapshot()
+    assert a.shape == (380, 380, 3) and a.dtype == np.uint8 and np.array_equal(a, b)
+    m = measure_chart(np.array(a))
+    assert m["noise_std"] < 1e-6 and m["colour_rmse"] == 0 and m["misregistration_px"] < 0.01
+    assert all(abs(v["gain"] - 1) < 1e-6 and v["noise"] < 1e-12 for v in m["bands"].values())
+    assert 0.5 < m["mtf50"] < 0.65   # an ideal edge sampled by square pixels: MTF50 about 0.58 cycles per pixel
+    sheet = chart_sheet(2)
+    assert sheet.shape[2] == 3 and sheet.std() > 20
+
+
+@pytest.mark.parametrize("severity", ["mild", "moderate", "severe"])
+def test_round_trip_each_preset(severity):
+    """calibrate names the preset a simulated photo came through, and its MTF50 follows the simulator's own
+    blur: the blur-free twin of the same seed's MTF times the blur's transfer function (bench.calibrate)."""
+    from dataclasses import replace
+
+    from snapshot3d.bench.calibrate import chart_capture, predicted_mtf50
+    from snapshot3d.scanner.presets import get_preset
+    from snapshot3d.scanner.scan import scan_image
+
+    for seed in (0, 1):
+        img, truth = chart_capture(severity, seed)
+        prof = calibrate_image(img)
+        assert prof["nearest_preset"] == severity, (seed, prof["preset_distance"])
+        assert prof["profile_version"] == PROFILE_VERSION
+        assert set(prof["bands"]) >= {"Y2LH", "Y1LH", "RG2LH"} and 0.05 < prof["channel"]["gain"] < 1.1
+        twin, _ = chart_capture(replace(get_preset(severity), defocus_px=(0.0, 0.0), motion_px=(0.0, 0.0)), seed)
+        sim = predicted_mtf50(scan_image(twin, chart=True).snapshot, truth)
+        assert abs(prof["mtf50"] / sim - 1) < 0.25, (seed, prof["mtf50"], sim)   # bench: <= 15% at mild
+        assert {"mild": 0.30, "moderate": 0.22, "severe": 0.15}[severity] < prof["mtf50"] < 0.6
+
+
+def test_calibrate_cli_writes_a_profile_that_loads(chart_photo, tmp_path):
+    out, rep = tmp_path / "profile.json", tmp_path / "report.json"
+    r = run_cli("calibrate", str(chart_photo / "photo.png"), "-o", str(out), "--report", str(rep))
+    assert r.returncode == 0, r.stderr
+    assert "nearest preset: mild" in r.stdout and "MTF50" in r.stdout and len(r.stdout.splitlines()) <= 20
+    prof = load_profile(out)
+    assert prof["mtf50"] > 0.4 and prof["channel"]["gain"] > 0.8 and prof["noise_std"] < 1.0
+    assert json.loads(rep.read_text())["timings_ms"]["scan"] > 0
+
+
+def test_profile_of_another_version_or_malformed(tmp_path, chart_photo):
+    good = tmp_path / "good.json"
+    assert run_cli("calibrate", str(chart_photo / "photo.png"), "-o", str(good)).returncode == 0
+    data = json.loads(good.read_text())
+    cases = {"other.json": json.dumps({**data, "profile_version": PROFILE_VERSION + 1}),
+             "text.json": "not json {", "list.json": "[1, 2]", "nofield.json": json.dumps({"profile_version": 1}),
+             "nan.json": json.dumps({**data, "mtf50": float("nan")}),
+             "preset.json": json.dumps({**data, "nearest_preset": "awful"})}
+    expect = {"other.json": "version", "text.json": "not a channel profile", "list.json": "no profile_version",
+              "nofield.json": "malformed", "nan.json": "malformed", "preset.json": "unknown preset"}
+    for name, text in cases.items():
+        (tmp_path / name).write_text(text)
+        with pytest.raises(UserError, match=expect[name]) as e:
+            load_profile(tmp_path / name)
+        assert "\n" not in str(e.value)
+    with pytest.raises(UserError, match="not found"):
+        load_profile(tmp_path / "missing.json")
+
+
+def test_photo_without_the_chart(tmp_path):
+    from snapshot3d.scanner.backgrounds import background_names, load_background
+
+    rng = np.random.default_rng(0)
+    wall = cv2.resize(load_background(background_names()[0]), (1600, 1200), interpolation=cv2.INTER_CUBIC)
+    cv2.imwrite(str(tmp_path / "wall.jpg"), cv2.cvtColor(wall, cv2.COLOR_RGB2BGR))
+    assert_one_line_error(run_cli("calibrate", str(tmp_path / "wall.jpg")), "no snapshot3d sheet found")
+    # a snapshot's sheet is a sheet, but not the chart
+    from snapshot3d.scanner.qr import SheetMeta
+    from snapshot3d.scanner.sheet import render_sheet
+
+    snap = rng.integers(0, 255, (380, 380, 3), np.uint8)
+    sheet = render_sheet(snap, SheetMeta(codec="print-2"), 2)
+    cv2.imwrite(str(tmp_path / "sheet.png"), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+    assert_one_line_error(run_cli("calibrate", str(tmp_path / "sheet.png")), "not the calibration chart")
+
+
+def test_decode_and_scan_refuse_the_chart(chart_photo, tmp_path):
+    r = run_cli("decode", str(chart_photo / "photo.png"), "-o", str(tmp_path / "scene"))
+    assert_one_line_error(r, "snapshot3d calibrate")
+    r = run_cli("scan", str(chart_photo / "photo.png"), "-o", str(tmp_path / "snap.png"))
+    assert_one_line_error(r, "calibration chart")
+
+
+def test_sheet_calibration_options(tmp_path):
+    assert_one_line_error(run_cli("sheet", "-o", str(tmp_path / "s.pdf")), "give the snapshot")
+    r = run_cli("sheet", str(tmp_path / "x.png"), "--calibration", "-o", str(tmp_path / "s.pdf"))
+    assert_one_line_error(r, "--calibration writes the calibration chart")
+    assert_one_line_error(run_cli("calibrate", "nothing.jpg", "-o", str(tmp_path / "p.txt")), ".json")
