@@ -117,7 +117,7 @@ def summary(profile: dict) -> str:
     b = profile["bands"]
     e = profile["expected_e2e_psnr"]
     lines = [
-        f"nearest preset: {profile['nearest_preset']}  (distances "
+        f"nearest preset: {profile['nearest_preset']}  (negative log-likelihood, lower is nearer: "
         + ", ".join(f"{k} {v:.1f}" for k, v in profile["preset_distance"].items()) + ")",
         f"MTF50: {profile['mtf50']:.3f} cycles/pixel (x {profile['mtf50_x']:.3f}, y {profile['mtf50_y']:.3f})",
         f"noise: {profile['noise_std']:.2f} codes std on flat greys; tone error {profile['tone_rmse']:.1f} codes RMS; "
