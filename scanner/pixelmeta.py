@@ -109,7 +109,7 @@ def pack(meta: SheetMeta, frame: Frame = FRAME) -> bytes:
             raise ValueError(f"codec id {meta.codec!r} is too long for the pixel mark")
         codec = bytes([len(codec)]) + codec
     fields = _values(meta)
-    decoder = (meta.decoder or 1) - 1
+    decoder = (1 if meta.decoder is None else meta.decoder) - 1
     if not 0 <= decoder < 8:
         raise ValueError(f"decoder tri-dec-{meta.decoder} does not fit the pixel mark (tri-dec-1 to tri-dec-8)")
     body = bytes([frame.version, meta.version]) + codec

@@ -43,7 +43,7 @@ class SheetMeta:
 
     @property
     def decoder_version(self) -> str:
-        return f"tri-dec-{self.decoder or 1}"
+        return f"tri-dec-{1 if self.decoder is None else self.decoder}"
 
     def as_dict(self) -> dict:
         return {"version": self.version, "codec": self.codec,

@@ -7,6 +7,8 @@ half a pixel on the way in.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 
@@ -42,12 +44,20 @@ def undistort(image: np.ndarray, fx: float, fy: float, cx: float, cy: float, mod
     if not np.any(coeffs):
         return image
     h, w = image.shape[:2]
-    k = np.array([[fx, 0, cx - 0.5], [0, fy, cy - 0.5], [0, 0, 1]], np.float64)
-    if model == "OPENCV_FISHEYE":
-        m1, m2 = cv2.fisheye.initUndistortRectifyMap(k, coeffs.reshape(4, 1), np.eye(3), k, (w, h), cv2.CV_32FC1)
-    else:
-        m1, m2 = cv2.initUndistortRectifyMap(k, coeffs, None, k, (w, h), cv2.CV_32FC1)
-    if not (np.isfinite(m1).all() and np.isfinite(m2).all()):
-        raise UserError(f"the {model} coefficients {np.round(coeffs, 4).tolist()} do not map the image (the lens "
-                        "model folds over): check them")
+    m1, m2 = _maps(w, h, float(fx), float(fy), float(cx), float(cy), model, tuple(float(c) for c in coeffs))
     return cv2.remap(np.ascontiguousarray(image), m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+@lru_cache(maxsize=2)
+def _maps(w: int, h: int, fx: float, fy: float, cx: float, cy: float, model: str, coeffs: tuple):
+    """OpenCV's (H, W) float32 undistortion maps of one camera, made once for every frame (and mask) it shares."""
+    k = np.array([[fx, 0, cx - 0.5], [0, fy, cy - 0.5], [0, 0, 1]], np.float64)
+    c = np.array(coeffs, np.float64)
+    if model == "OPENCV_FISHEYE":
+        m1, m2 = cv2.fisheye.initUndistortRectifyMap(k, c.reshape(4, 1), np.eye(3), k, (w, h), cv2.CV_32FC1)
+    else:
+        m1, m2 = cv2.initUndistortRectifyMap(k, c, None, k, (w, h), cv2.CV_32FC1)
+    if not (np.isfinite(m1).all() and np.isfinite(m2).all()):
+        raise UserError(f"the {model} coefficients {np.round(c, 4).tolist()} do not map the image (the lens "
+                        "model folds over): check them")
+    return m1, m2

@@ -43,6 +43,8 @@ def test_metadata_line_carries_the_decoder():
         decode_payload(encode_payload(old) + "|d=1.5")
     with pytest.raises(UserError, match="fitted for decoder tri-dec-9 .*this build has decoder tri-dec-1, tri-dec-2"):
         check_meta(SheetMeta(codec=formats.PRINT_CODEC, box=BOX, planes=(16, 4), decoder=9))
+    with pytest.raises(UserError, match="fitted for decoder tri-dec-0"):   # d=0 is no decoder, not tri-dec-1
+        check_meta(decode_payload(encode_payload(old) + "|d=0"))
 
 
 def test_pixel_mark_carries_the_decoder():
@@ -50,8 +52,9 @@ def test_pixel_mark_carries_the_decoder():
         for d in (None, 2, 8):
             meta = SheetMeta(codec=formats.FILE_CODEC, box=BOX, planes=(64, 8), decoder=d)
             assert pm.unpack(pm.pack(meta, frame)).decoder == d
-    with pytest.raises(ValueError, match="does not fit the pixel mark"):
-        pm.pack(SheetMeta(codec=formats.FILE_CODEC, decoder=9))
+    for bad in (0, 9):
+        with pytest.raises(ValueError, match="does not fit the pixel mark"):
+            pm.pack(SheetMeta(codec=formats.FILE_CODEC, decoder=bad))
 
 
 def test_scene_of_each_decoder_writes_its_version():

@@ -166,6 +166,17 @@ def add_commands(sub) -> None:
     _quick(bv, scenes="bench/models/spot-print.s3d", hosts="coffee", heldout=0, severities="moderate", seeds=1,
            views=2, size=48, search="")
 
+    bs = add(bsub, "decoder-search", "candidate shared decoders scored by what they fit: spot and lego at small "
+                                     "plane sizes, field_psnr clean and with plane noise (JSON lines; for a GPU)",
+             _run("snapshot3d.bench.decoder_search", "bench_decoder_search_command"))
+    bs.add_argument("--decoders", default="tri-dec-1,tri-dec-2",
+                    help="comma-separated shipped versions or weights files from 'train decoder -o FILE'")
+    bs.add_argument("--sizes", default="16x4,32x4", help="comma-separated plane sizes RxC")
+    bs.add_argument("--steps", type=int, default=1500, help="fit steps")
+    bs.add_argument("--noise", type=float, default=0.05, help="std of the plane noise of field_psnr_noise")
+    bs.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="where the fits run")
+    bs.add_argument("--out-file", default="bench/results/decoder_search.jsonl", help="JSON lines appended to")
+
     bc = add(bsub, "codec", "a medium's codec: host fidelity vs restore_psnr through simulate+scan; baselines; "
                             "charts (codec.* for the file medium, codec_print.* for the print medium)",
              _run("snapshot3d.bench.codec", "bench_codec_command"))
