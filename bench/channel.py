@@ -75,6 +75,9 @@ def measure_residual(digital: np.ndarray, rectified: np.ndarray) -> dict:
 
 
 def bench_channel_command(args) -> int:
+    if getattr(args, "real", False):
+        from .channel_real import bench_channel_real_command
+        return bench_channel_real_command(args)
     host = cv2.resize(load_background("astronaut"), (formats.SNAPSHOT_SIZE,) * 2, interpolation=cv2.INTER_AREA)
     sheet = render_sheet(host, SheetMeta(), 4)
     from snapshot3d.scanner.presets import SEVERITIES

@@ -7,7 +7,8 @@ the snapshots of the file codec and the reference views).
   numpy reference of the print restore graph takes on the same scan;
 - a sweep on one capture (`--sweep-severity`) of samples per pixel, bake resolution, probe size and render
   size: decode time against `restore_psnr`, with the Pareto front;
-- the quality estimate's calibration, one line per codec (`viewer.quality`): captures of every severity
+- the quality estimate's calibration, one line per codec (`viewer.quality`; the print codec's views term is
+  read as it is, scored here and on held-out scenes by `snapshot3d bench quality`): captures of every severity
   (jpeg90 to severe) of two scenes in calibration hosts fit `restore_psnr` against the codec's own
   predictor (print: log10 of the pilots' expected plane error; file: the markers' pilot_psnr); the line
   is then scored on captures in other hosts it never saw (its held-out error is what `decode` reports).
@@ -39,13 +40,14 @@ from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
 from snapshot3d.scene import load_scene_file, quantize_planes
 from snapshot3d.viewer.decode import decode_photo
-from snapshot3d.viewer.quality import calibration_file, predictor_value
+from snapshot3d.viewer.quality import VIEWS_PREDICTOR, calibration_file, predictor_value
 from snapshot3d.viewer.render import RenderConfig, render_views
 from snapshot3d.viewer.runtime import field_models
 
 from .common import pyplot, run_metadata, write_rows
 
-__all__ = ["bench_decode_command", "CALIB_SEVERITIES", "fit_calibration"]
+__all__ = ["bench_decode_command", "CALIB_SEVERITIES", "fit_calibration", "identity_calibration", "FIT_HOSTS",
+           "CHECK_HOSTS"]
 
 # the default (RenderConfig: samples 16, bake 96, probe_div 4, size 380) is measured once, as "default"
 SWEEP = [("samples", v) for v in (4, 8, 12, 24, 32)] + [("bake", v) for v in (32, 64, 128, 160)] + \
@@ -88,14 +90,16 @@ def _photo(sheet, severity: str, seed: int, folder: Path) -> Path:
     return path
 
 
-def fit_calibration(fit_rows: list[dict], check_rows: list[dict], codec: str) -> dict:
-    """Least-squares restore_psnr = intercept + slope * predictor on `fit_rows`, and how well it predicts
-    `check_rows` (photos in other hosts, never used in the fit)."""
-    x, y = np.array([r["predictor"] for r in fit_rows]), np.array([r["restore_psnr"] for r in fit_rows])
+def fit_calibration(fit_rows: list[dict], check_rows: list[dict], codec: str, key: str = "predictor") -> dict:
+    """Least-squares restore_psnr = intercept + slope * row[key] on `fit_rows`, and how well it predicts
+    `check_rows` (photos in other hosts, or of other scenes, never used in the fit). key "log10_rmse": the
+    print line shipped before the views term (`bench quality` compares the two)."""
+    x, y = np.array([r[key] for r in fit_rows]), np.array([r["restore_psnr"] for r in fit_rows])
     slope, intercept = np.polyfit(x, y, 1)
-    xe, ye = np.array([r["predictor"] for r in check_rows]), np.array([r["restore_psnr"] for r in check_rows])
+    xe, ye = np.array([r[key] for r in check_rows]), np.array([r["restore_psnr"] for r in check_rows])
     pred = intercept + slope * np.clip(xe, x.min(), x.max())
-    name = "log10(plane_rmse_expected)" if medium_of(codec) is PRINT else "pilot_psnr (markers, dB)"
+    name = ("log10(plane_rmse_expected)" if key == "log10_rmse" else VIEWS_PREDICTOR) if medium_of(codec) is PRINT \
+        else "pilot_psnr (markers, dB)"
     return {"codec": codec, "predictor": name, "slope": float(slope), "intercept": float(intercept),
             "range": [float(x.min()), float(x.max())], "fit_corr": float(np.corrcoef(x, y)[0, 1]),
             "held_out_corr": float(np.corrcoef(xe, ye)[0, 1]) if len(xe) > 2 and np.std(xe) > 0 else None,
@@ -106,6 +110,20 @@ def fit_calibration(fit_rows: list[dict], check_rows: list[dict], codec: str) ->
                                      for s in CALIB_SEVERITIES if any(r["severity"] == s for r in check_rows)},
             "source": f"snapshot3d bench decode: scenes {sorted({r['scene'] for r in fit_rows})}, fitted on hosts "
                       f"{list(FIT_HOSTS)}, scored on {list(CHECK_HOSTS)}, severities {','.join(CALIB_SEVERITIES)}"}
+
+
+def identity_calibration(check_rows: list[dict], codec: str) -> dict:
+    """The views term read as the estimate itself (slope 1, no offset), in `fit_calibration`'s layout. Fitted
+    lines carry the calibration hosts' own bias to other scenes (measured: worse on held-out scenes)."""
+    x = np.array([r["predictor"] for r in check_rows])
+    y = np.array([r["restore_psnr"] for r in check_rows])
+    return {"codec": codec, "predictor": VIEWS_PREDICTOR, "slope": 1.0, "intercept": 0.0, "range": [0.0, 100.0],
+            "fit_corr": None, "held_out_corr": float(np.corrcoef(x, y)[0, 1]) if len(x) > 2 else None,
+            "held_out_rmse_db": float(np.sqrt(np.mean((x - y) ** 2))),
+            "held_out_median_abs_error_db": float(np.median(np.abs(x - y))), "fit_n": 0, "held_out_n": len(x),
+            "held_out_by_severity": {s: float(np.sqrt(np.mean([(r["predictor"] - r["restore_psnr"]) ** 2
+                                                               for r in check_rows if r["severity"] == s])))
+                                     for s in CALIB_SEVERITIES if any(r["severity"] == s for r in check_rows)}}
 
 
 def _against_numpy(photo: Path, codes: np.ndarray) -> tuple[dict, np.ndarray]:
@@ -125,11 +143,12 @@ def _against_numpy(photo: Path, codes: np.ndarray) -> tuple[dict, np.ndarray]:
             "restore_numpy_ms": ms}, capture
 
 
-def _calibration_rows(scenes: dict, codec: str, seeds: int, out: Path) -> list[dict]:
+def _calibration_rows(scenes: dict, codec: str, seeds: int, out: Path,
+                      hosts: tuple = FIT_HOSTS + CHECK_HOSTS) -> list[dict]:
     rows = []
     for sname, scene in scenes.items():
         ref = _reference(scene, 128)
-        for host in FIT_HOSTS + CHECK_HOSTS:
+        for host in hosts:
             sheet = render_sheet(_snapshot(scene, codec, load_host(host)), scene_meta(scene, codec), 2)
             for sev in CALIB_SEVERITIES:
                 for seed in range(seeds):
@@ -144,7 +163,12 @@ def _calibration_rows(scenes: dict, codec: str, seeds: int, out: Path) -> list[d
                     rows.append({"group": "calib", "codec": codec, "scene": sname, "host": host, "severity": sev,
                                  "seed": seed, "restore_psnr": psnr(dec.views, ref), "pilot_psnr": q["pilot_psnr_db"],
                                  "plane_rmse_expected": q["plane_rmse_expected"],
-                                 "predictor": predictor_value(codec, q["pilot_psnr_db"], q["plane_rmse_expected"]),
+                                 "views_psnr_expected": q.get("views_psnr_expected_db"),
+                                 "log10_rmse": predictor_value(codec, None, q["plane_rmse_expected"],
+                                                               predictor="log10(plane_rmse_expected)"),
+                                 "restore_psnr_expected": q["restore_psnr_expected_db"],
+                                 "predictor": predictor_value(codec, q["pilot_psnr_db"], q["plane_rmse_expected"],
+                                                              q.get("views_psnr_expected_db")),
                                  **(_against_numpy(photo, dec.scene.codes)[0] if codec == formats.PRINT_CODEC else {})})
                     photo.unlink(missing_ok=True)
             print(f"calibration {codec} {sname} {host}: {len(rows)} captures", flush=True)
@@ -164,12 +188,15 @@ def bench_decode_command(args) -> int:
     if getattr(args, "profile", False):
         from .decode_profile import profile_decode
 
-        doc = profile_decode(out, args.repeats)
+        doc = profile_decode(out, args.repeats, cold=args.cold)
         shares = ", ".join(f"{s} {doc['stages_ms_median'][s]:.0f} ms ({doc['stages_share'][s]:.0%})"
                            for s in doc["stages_share"])
         print(f"decode of {doc['photo']}: {doc['decode_ms_median']:.0f} ms median over {doc['repeats']} "
               f"({shares}); first view {doc['first_view_ms_median']:.0f} ms; wrote {out / 'decode_profile.json'} "
               f"and decode_profile.txt")
+        if "cold" in doc:
+            print(f"cold (a fresh process each, median of {args.cold}): {doc['cold']['decode_ms']:.0f} ms, first view "
+                  f"{doc['cold']['first_view_ms']:.0f} ms; chart {out / 'decode_profile.png'}")
         return 0
     scene = load_scene_file(args.scene)
     sheet = render_sheet(_snapshot(scene, formats.PRINT_CODEC, load_host("builtin:" + args.host)),
@@ -215,7 +242,10 @@ def bench_decode_command(args) -> int:
         ok = [r for r in cal_rows if "restore_psnr" in r]
         fit = [r for r in ok if r["host"] in FIT_HOSTS]
         check = [r for r in ok if r["host"] in CHECK_HOSTS]
-        if len(fit) >= 3 and check:
+        if codec == formats.PRINT_CODEC and check:
+            # no line: the views term is the estimate (`bench quality` scores it on held-out scenes and writes it)
+            calibrations[codec] = identity_calibration(check, codec)
+        elif len(fit) >= 3 and check:
             calibrations[codec] = fit_calibration(fit, check, codec)
             cal_dir.mkdir(parents=True, exist_ok=True)
             (cal_dir / calibration_file(codec)).write_text(json.dumps(calibrations[codec], indent=2) + "\n")

@@ -25,7 +25,7 @@ from snapshot3d.scene import load_scene_file
 from .codec_print import E2E, _rows, heldout_hosts
 from .common import ViewJudge, median, pyplot, write_report
 
-__all__ = ["bench_decoders_command"]
+__all__ = ["bench_decoders_command", "e2e_rows"]
 
 
 def _summary(rows: list[dict], fields: dict) -> dict:
@@ -93,9 +93,11 @@ def write_chart(doc: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def bench_decoders_command(args) -> int:
-    out = Path(args.out)
-    t0 = time.time()
+def e2e_rows(args, t0: float) -> tuple[list[str], dict, list[str], list[dict], dict]:
+    """The print medium's rows of every scene file in args.scenes (comma-separated) in every host (args.hosts
+    bundled, args.heldout held-out), severity and seed: restore_psnr, and e2e_psnr at args.views held-out
+    ground-truth views -> (paths, hosts, severities, rows, fields: per scene its decoder, planes, scene_kb and
+    field_psnr at the same views with no channel). Shared by `bench decoders` and `bench e2e`."""
     paths = [p for p in args.scenes.split(",") if p]
     missing = [p for p in paths if not Path(p).is_file()]
     if missing:
@@ -113,6 +115,14 @@ def bench_decoders_command(args) -> int:
             for r in _rows(["print"], scene, name, hname, host, severities, args.seeds, judge, e2e):
                 rows.append({**r, "decoder": scene.decoder_version})
         print(f"{name}: {len(rows)} rows ({time.time() - t0:.0f} s)", flush=True)
+    return paths, hosts, severities, rows, fields
+
+
+def bench_decoders_command(args) -> int:
+    out = Path(args.out)
+    t0 = time.time()
+    paths, hosts, severities, rows, fields = e2e_rows(args, t0)
+    scenes = dict.fromkeys(Path(p).stem for p in paths)
     search = [json.loads(line) for line in Path(args.search).read_text().splitlines() if line.strip()] \
         if args.search else []
     names = list(scenes)

@@ -127,6 +127,11 @@ def _browser(base: str, out: Path) -> dict:
         page.screenshot(path=str(out / "serve_page.png"))
         fps380 = [page.evaluate("snapshot3d.measureFps(20, 380)") for _ in range(3)]
         fps190 = [page.evaluate("snapshot3d.measureFps(20, 190)") for _ in range(3)]
+        moving_size = page.evaluate("snapshot3d.chooseMovingSize()")  # what the page picked on this GL
+        moving = [{"size": size, "fps_median": float(np.median([page.evaluate(f"snapshot3d.measureFps(20, {size})")
+                                                                  for _ in range(3)])),
+                   "psnr_vs_full_db": page.evaluate(f"snapshot3d.movingPsnr({size}, 6)")}
+                  for size in sorted({190, 270, int(moving_size)})]
         renderer = page.evaluate("(() => { const g = document.createElement('canvas').getContext('webgl2'); "
                                  "const e = g.getExtension('WEBGL_debug_renderer_info'); "
                                  "return g.getParameter(e ? e.UNMASKED_RENDERER_WEBGL : g.RENDERER); })()")
@@ -149,6 +154,7 @@ def _browser(base: str, out: Path) -> dict:
     return {"first_view_ms": firsts, "first_view_ms_median": float(np.median(firsts)),
             "fps_380": fps380, "fps_380_median": float(np.median(fps380)),
             "fps_190": fps190, "fps_190_median": float(np.median(fps190)), "webgl_renderer": renderer,
+            "moving_size_chosen": moving_size, "moving_paths": moving,
             "local_decode": local, "local_decode_ms_median": float(np.median([sum(v for k, v in r.items() if k != "source")
                                                                                for r in local]))}
 
@@ -204,7 +210,8 @@ def bench_serve_command(args) -> int:
     }
     doc = write_report(out, "serve", rows, {
         "server": "snapshot3d serve, default limits (max_decodes 2)", "inputs": [p.name for p in inputs],
-        "targets": {"render_ms_median": "<= 60", "client_fps_380": ">= 30 (report what software GL gives)",
+        "targets": {"render_ms_median": "<= 40", "client_fps_380": ">= 30, or the moving path at >= 30 with its "
+                                                                  "PSNR against the full path reported",
                     "answered": "all (200, or 503 with Retry-After)", "peak_server_rss_mb": "<= 2048",
                     "other_5xx": 0, "first_view_ms": "<= 3000"},
         "summary": summary, "render_ms": render_ms})
@@ -224,7 +231,7 @@ def _chart(path: Path, rows: list[dict], render_ms: list[float], doc: dict) -> N
               title=f"{s['uploads']} uploads at once: first try {s['first_try']}")
     ax[0].legend()
     ax[1].hist(render_ms, bins=20)
-    ax[1].axvline(60, color="C3", ls="--", label="target 60 ms")
+    ax[1].axvline(40, color="C3", ls="--", label="target 40 ms")
     ax[1].set(xlabel="/render 380x380 (ms)", ylabel="requests",
               title=f"/render median {s['render_ms_median']:.0f} ms; peak server {s['peak_server_rss_mb']:.0f} MB; "
                     f"{doc['cores']} cores")

@@ -4,7 +4,11 @@ write a channel profile (JSON). numpy and OpenCV only (the phone side).
 
 The nearest preset is the one whose reference measurements (PRESET_REFERENCE: mean and spread of log
 MTF50, log band gain and log noise per coefficient over simulated photos of the chart) lie nearest, in
-units of their spread (a diagonal Gaussian's negative log-likelihood)."""
+units of their spread (a diagonal Gaussian's negative log-likelihood).
+
+The profile's `print_channel` holds `print_channel.ChannelModel`'s fields (gain, unit) as the print codec's
+receiver would measure them on mid grey (`chart_measure.measure_bands`), and `bands` each band's gain and
+unit noise in the same terms; `channel.unit` stays the raw power per coefficient ([0, 1]^2 units)."""
 from __future__ import annotations
 
 import json
@@ -26,10 +30,10 @@ FEATURES = ("mtf50", "gain", "unit")
 """the measurements the nearest preset is chosen by (their logs)"""
 PRESET_REFERENCE = {
     # (mean, std) of log(mtf50), log(channel gain), log(channel unit) over simulated chart photos, seeds
-    # 100-111 per preset, sheet at 2 dots per snapshot pixel (`snapshot3d bench calibrate --reference`)
-    "mild": ((-0.859, 0.184), (-0.324, 0.085), (-6.735, 0.328)),
-    "moderate": ((-1.158, 0.182), (-0.764, 0.14), (-6.936, 0.251)),
-    "severe": ((-1.382, 0.213), (-1.299, 0.463), (-6.333, 0.42)),
+    # 100-111 per preset, sheet at 2 dots per snapshot pixel, chart calib-2 (`snapshot3d bench calibrate --reference`)
+    "mild": ((-0.859, 0.184), (-0.287, 0.082), (-6.7, 0.323)),
+    "moderate": ((-1.158, 0.181), (-0.758, 0.137), (-6.978, 0.254)),
+    "severe": ((-1.384, 0.211), (-1.304, 0.461), (-6.361, 0.424)),
 }
 E2E_REFERENCE = {
     # median e2e_psnr (dB) through each preset of the print codec's scenes at planes 16x4 (3072 values):
@@ -64,7 +68,14 @@ def calibrate_image(img: np.ndarray) -> dict:
     from .scan import scan_image
 
     t0 = time.perf_counter()
-    res = scan_image(img, chart=True)
+    try:
+        res = scan_image(img, chart=True)
+    except UserError as e:
+        if "'calib-" in str(e):   # a chart of another version (calib-1 carried +-1 coefficients)
+            raise UserError(f"the photo holds a calibration chart of another version than this build's "
+                            f"{formats.CALIB_CODEC}: print a new one with 'snapshot3d sheet --calibration -o "
+                            f"chart.pdf' and photograph that") from None
+        raise
     t1 = time.perf_counter()
     if res.qr is not None and res.qr["codec"] != formats.CALIB_CODEC:
         raise UserError(f"the photo holds a snapshot sheet (codec {res.qr['codec']}), not the calibration chart: print "
@@ -104,9 +115,12 @@ def load_profile(path) -> dict:
         if key not in data:
             raise UserError(f"{p.name}: malformed channel profile (no {key})")
     nums = [data["mtf50"], data["noise_std"], data["channel"].get("gain") if isinstance(data["channel"], dict) else None]
+    if "print_channel" in data:   # written since the chart measured the codec's terms (older profiles lack it)
+        pc = data["print_channel"]
+        nums += [pc.get("gain"), pc.get("unit")] if isinstance(pc, dict) else [None]
     if not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0 for v in nums):
-        raise UserError(f"{p.name}: malformed channel profile (mtf50, noise_std and channel gain must be finite "
-                        f"numbers >= 0)")
+        raise UserError(f"{p.name}: malformed channel profile (mtf50, noise_std, channel gain and print_channel "
+                        f"gain and unit must be finite numbers >= 0)")
     if data["nearest_preset"] not in PRESET_REFERENCE:
         raise UserError(f"{p.name}: malformed channel profile (unknown preset {str(data['nearest_preset'])[:20]!r})")
     return data
@@ -123,7 +137,11 @@ def summary(profile: dict) -> str:
         f"noise: {profile['noise_std']:.2f} codes std on flat greys; tone error {profile['tone_rmse']:.1f} codes RMS; "
         f"colour error after correction {profile['colour_rmse']:.1f} codes RMS",
         f"misregistration: {profile['misregistration_px']:.2f} px",
-        f"print channel: gain {profile['channel']['gain']:.3f}, noise {profile['channel']['unit']:.3g} per coefficient",
+        (f"print channel, as the codec's receiver reads it: gain {profile['print_channel']['gain']:.3f}, noise "
+         f"{profile['print_channel']['unit']:.2f} x the print noise model ({profile['channel']['unit']:.3g} per "
+         f"coefficient)" if "print_channel" in profile else
+         f"print channel: gain {profile['channel']['gain']:.3f}, noise {profile['channel']['unit']:.3g} per "
+         f"coefficient"),
         "per band gain: " + ", ".join(f"{k} {v['gain']:.2f}" for k, v in b.items()),
         f"payload: planes {e['planes'][0]}x{e['planes'][1]}; expected e2e_psnr spot {e['spot']:.1f} dB, "
         f"lego {e['lego']:.1f} dB (the print codec's bench at this preset)",

@@ -8,8 +8,11 @@ a deterministic (380, 380, 3) uint8 sRGB RGB pattern; boxes are (x0, y0, x1, y1)
 - PATCH_BOXES: flat grey patches at PATCH_LEVELS (sRGB codes) for the noise and the colour error left;
 - RAMP_BOX: a tone ramp, sRGB code 0 at its left edge to 255 at its right;
 - CAPTION_BOX: a strip for the caption the sheet writes at printer resolution (not measured);
-- CARRIER_BOXES: two 184 x 184 squares of mid grey carrying known random +-1 coefficients in every detail
-  band the print codec uses (`print_carriers.PRINT_BANDS`, their relative energies), one seed per square."""
+- CARRIER_BOXES: two 184 x 184 squares of mid grey carrying known random Gaussian coefficients in every
+  detail band the print codec uses (`print_carriers.PRINT_BANDS`, their relative energies), one seed per square.
+  Gaussian since `calib-2` (`calib-1` had +-1): through the simulated printer's halftone (a 17-level quantizer
+  per snapshot pixel) a +-1 pattern's few distinct pixel values read 14-16 % below the print codec's own
+  carriers at the same amplitude in the Y2 bands; Gaussian coefficients read like them (docs/calibration.md)."""
 from __future__ import annotations
 
 from functools import lru_cache
@@ -38,8 +41,8 @@ CAPTION_BOX = (0, 176, 380, 192)
 CARRIER_BOXES = ((6, 194, 190, 378), (190, 194, 374, 378))
 CARRIER_STD = 0.08               # pixel std of the carrier pattern (sRGB in [0, 1])
 _GREY = 128
-CAPTION = ("snapshot3d calibration chart (calib-1). Print at 100%, lay flat, photograph the whole sheet square "
-           "on in even light, then run: snapshot3d calibrate PHOTO")
+CAPTION = (f"snapshot3d calibration chart ({formats.CALIB_CODEC}). Print at 100%, lay flat, photograph the whole "
+           "sheet square on in even light, then run: snapshot3d calibrate PHOTO")
 
 
 def _edge_rois() -> tuple:
@@ -88,12 +91,12 @@ def _edge_field() -> np.ndarray:
 
 
 def _carriers(seed: int, side: int) -> np.ndarray:
-    """(side, side) float RGB pattern around 0: +-1 coefficients in PRINT_BANDS (their energies), scaled to
-    CARRIER_STD per pixel."""
+    """(side, side) float RGB pattern around 0: unit Gaussian coefficients in PRINT_BANDS (times the square
+    root of their energies), scaled to CARRIER_STD per pixel."""
     rng = np.random.default_rng(seed)
     coeffs = {b: np.zeros(v.shape) for b, v in bands.analyse(np.zeros((side, side, 3))).items()}
     for b, energy in PRINT_BANDS.items():
-        coeffs[b] = rng.choice([-1.0, 1.0], size=coeffs[b].shape) * np.sqrt(energy)
+        coeffs[b] = rng.standard_normal(coeffs[b].shape) * np.sqrt(energy)
     pat = bands.synthesise(coeffs)
     return pat * (CARRIER_STD / float(pat.std()))
 

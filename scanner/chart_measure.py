@@ -146,31 +146,52 @@ def measure_tone(img: np.ndarray, points: int = 17) -> dict:
 
 
 def measure_bands(img: np.ndarray) -> dict:
-    """Per print-codec band (`PRINT_BANDS`), over the carrier squares: `gain`, the least-squares ratio of the
-    capture's coefficients to the chart's, and `noise`, the power per coefficient left ([0, 1]^2 units);
-    and the same in `print_channel`'s terms over all bands (`gain`, and `unit`: the noise power per
-    coefficient of unit energy)."""
+    """The print channel per print-codec band (`PRINT_BANDS`) over the carrier squares, in `print_channel`'s
+    terms: every coefficient weighed as the codec's matched filters weigh it (`print_carriers.filters`: a
+    carrier's chip w goes as 1/sqrt(n) and its filter q as w/n, n the print noise model `band_noise` of the
+    capture there; so a gain counts each coefficient by q w, 1/n^2, and a noise power by q^2, 1/n^3).
+    Per band: `gain`, the weighted least-squares ratio of the capture's coefficients to the chart's;
+    `noise`, the power per coefficient left ([0, 1]^2 units, unweighted); `unit`, the power left relative to
+    the noise model (what `print_read.band_response` calls the noise). Over all bands: `print_channel`, the
+    `print_channel.ChannelModel` fields (`gain`, `unit`: one reading over all bands' chips, as a carrier's),
+    and `channel`, unweighted as before `print_channel` was added (`gain`: one least-squares ratio over all
+    bands' coefficients; `unit`: the raw power per coefficient left, [0, 1]^2 units)."""
+    from snapshot3d.codecs.print_carriers import band_noise
+
     ref = chart.chart_snapshot()
-    num = {b: 0.0 for b in PRINT_BANDS}
-    den, res2, cnt = dict(num), dict(num), dict(num)
-    pairs = []
+    model = band_noise(img / 255.0)
+    parts = {b: [] for b in PRINT_BANDS}   # (capture, chart, noise model) coefficients of each square
     for x0, y0, x1, y1 in chart.CARRIER_BOXES:
         c = bands.analyse(img[y0:y1, x0:x1] / 255.0)
         r = bands.analyse(ref[y0:y1, x0:x1] / 255.0)
-        pairs.append((c, r))
         for b in PRINT_BANDS:
-            num[b] += float(np.sum(c[b] * r[b]))
-            den[b] += float(np.sum(r[b] * r[b]))
-    gain = {b: num[b] / max(den[b], 1e-30) for b in PRINT_BANDS}
-    for c, r in pairs:
-        for b in PRINT_BANDS:
-            res2[b] += float(np.sum((c[b] - gain[b] * r[b]) ** 2))
-            cnt[b] += c[b].size
-    noise = {b: res2[b] / cnt[b] for b in PRINT_BANDS}
+            f = 2 ** int(b[-3])   # the square's place in the band's whole-square map (to a cell: the model is smooth)
+            h, w = c[b].shape
+            parts[b].append((c[b], r[b], model[b][y0 // f:y0 // f + h, x0 // f:x0 // f + w]))
+    num, den, gain, out = {}, {}, {}, {}
+    for b, ps in parts.items():
+        num[b] = sum(float(np.sum(c * r / n ** 2)) for c, r, n in ps)
+        den[b] = sum(float(np.sum(r * r / n ** 2)) for c, r, n in ps)
+        gain[b] = num[b] / max(den[b], 1e-30)
     total_g = sum(num.values()) / max(sum(den.values()), 1e-30)
-    unit = sum(res2.values()) / sum(cnt.values())
-    return {"bands": {b: {"gain": round(gain[b], 4), "noise": float(f"{noise[b]:.4g}")} for b in PRINT_BANDS},
-            "channel": {"gain": round(total_g, 4), "unit": float(f"{unit:.4g}")}}
+    plain_g = sum(float(np.sum(c * r)) for ps in parts.values() for c, r, _ in ps) / max(
+        sum(float(np.sum(r * r)) for ps in parts.values() for _, r, _ in ps), 1e-30)
+    res2 = cnt = rel = var = 0.0
+    for b, ps in parts.items():
+        e = PRINT_BANDS[b]
+        r2 = [(c - gain[b] * r) ** 2 for c, r, _ in ps]
+        rb = sum(float(np.sum(x / n ** 3)) for x, (_, _, n) in zip(r2, ps))
+        vb = sum(float(np.sum(1.0 / n ** 2)) for _, _, n in ps)
+        nb = sum(x.size for x in r2)
+        pg = sum(float(np.sum(c * r)) for c, r, _ in ps) / max(sum(float(np.sum(r * r)) for _, r, _ in ps), 1e-30)
+        raw = sum(float(np.sum((c - pg * r) ** 2)) for c, r, _ in ps)   # unweighted, as `noise` always was
+        out[b] = {"gain": round(gain[b], 4), "noise": float(f"{raw / nb:.4g}"), "unit": float(f"{rb / vb:.4g}")}
+        rel += e * sum(float(np.sum((c - total_g * r) ** 2 / n ** 3)) for c, r, n in ps)
+        var += e * vb
+        res2 += raw
+        cnt += nb
+    return {"bands": out, "channel": {"gain": round(plain_g, 4), "unit": float(f"{res2 / cnt:.4g}")},
+            "print_channel": {"gain": round(total_g, 4), "unit": float(f"{rel / var:.4g}")}}
 
 
 def measure_misregistration(img: np.ndarray) -> dict:

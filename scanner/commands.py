@@ -48,19 +48,20 @@ def _sheet_png(path: Path) -> Path:
 
 
 def simulate_command(args) -> int:
-    from .presets import get_preset, print_dots
+    from .presets import print_dots
     from .simulate import simulate
 
     out = Path(args.output)
     ext = out.suffix.lower()
     if ext not in (".jpg", ".jpeg", ".png"):
         raise UserError(f"cannot write {out.name}: use a .jpg or .png file name")
-    if args.severity == "none" and ext != ".png":
+    if (args.severity or "mild") == "none" and ext != ".png":
         raise UserError("severity 'none' is lossless: write the photo as .png")
     integer(args.seed, "--seed", 0, 2 ** 32 - 1)
+    preset, solved = _simulate_preset(args)
     png = _sheet_png(Path(args.sheet))
     sheet = cv2.cvtColor(read_image_bgr(png, "sheet"), cv2.COLOR_BGR2RGB)
-    preset, width_mm = get_preset(args.severity), _printed_width_mm(png, sheet.shape[1])
+    width_mm = _printed_width_mm(png, sheet.shape[1])
     if preset.physical and width_mm is not None:  # the printer's dots per snapshot pixel follow the print's size
         preset = replace(preset, print_dots_per_px=print_dots(width_mm))
     try:
@@ -71,11 +72,32 @@ def simulate_command(args) -> int:
         img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
         ok, buf = cv2.imencode(ext if ext != ".jpeg" else ".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 100])
         data = buf.tobytes()
+    if solved is not None:
+        truth["profile"] = solved
     if args.truth:
         write_atomic(args.truth, _json_bytes(truth))
     write_atomic(out, data)
-    print(f"wrote {out} ({truth['frame'][0]}x{truth['frame'][1]}, severity {args.severity}, seed {args.seed})")
+    through = f"severity {args.severity or 'mild'}" if solved is None else (
+        f"profile {Path(args.profile).name}: {solved['base']} with defocus {solved['defocus_px']:.2f} px, noise "
+        f"x{solved['noise_scale']:.2f}" + (f"; beyond the simulator's range in {', '.join(solved['clamped'])}"
+                                          if solved["clamped"] else ""))
+    print(f"wrote {out} ({truth['frame'][0]}x{truth['frame'][1]}, {through}, seed {args.seed})")
     return 0
+
+
+def _simulate_preset(args):
+    """The preset `simulate` photographs through: --severity's, or one solved from --profile (and what was
+    solved, else None)."""
+    from .presets import get_preset
+
+    if getattr(args, "profile", None) is None:
+        return get_preset(args.severity or "mild"), None
+    if args.severity is not None:
+        raise UserError("give --severity or --profile, not both")
+    from .calibrate import load_profile
+    from .profile_channel import profile_preset
+
+    return profile_preset(load_profile(args.profile))
 
 
 def draw_overlay(img_bgr: np.ndarray, result, max_side: int = 1600) -> np.ndarray:

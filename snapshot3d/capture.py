@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 
 from . import validate
+from .auto_box import box_from_cameras
 from .carve import carve, tight_box
 from .errors import UserError
 from .posed import PosedImages
@@ -25,8 +26,9 @@ class CaptureOptions:
     holdout: int | None = None
     """every N-th frame (0, N, 2N, ...) is held out for field_psnr; 0: none (the training frames are scored);
     None: the layout's own split (Blender: its test split; nerfstudio, COLMAP: every 8th)"""
-    box: tuple | None = None
-    """(x0, y0, z0, x1, y1, z1) world box, in the world after the up rotation; None: from masks or cameras"""
+    box: tuple | str | None = None
+    """(x0, y0, z0, x1, y1, z1) world box, in the world after the up rotation; None: from masks or cameras;
+    "auto": without masks, the cube that most views hold in their frame (`auto_box.overlap_box`), else as None"""
     up: object = None
     """"auto" (the mean of the cameras' up vectors), an (x, y, z) vector, or None: the layout's default
     (Blender, builtin: as given; nerfstudio, COLMAP: auto). The world is rotated so that it becomes +z."""
@@ -44,10 +46,10 @@ def _floats(text: str, n: int, flag: str) -> tuple:
     return vals
 
 
-def parse_box(text: str | None) -> tuple | None:
-    """`--box x0,y0,z0,x1,y1,z1` -> six floats (checked as a scene box), or None."""
-    if text is None:
-        return None
+def parse_box(text: str | None) -> tuple | str | None:
+    """`--box x0,y0,z0,x1,y1,z1` -> six floats (checked as a scene box); `--box auto` -> "auto"; or None."""
+    if text is None or text == "auto":
+        return text
     return tuple(validate.check_box(_floats(text, 6, "--box"), "--box").reshape(-1).tolist())
 
 
@@ -179,8 +181,12 @@ def assemble(frames: list, opts: CaptureOptions, *, where: str, name: str, layou
         how = f"every {holdout}-th frame" if holdout else "none held out"
     else:
         train, test, how = default_split
-    if opts.box is not None:
+    if opts.box is not None and opts.box != "auto":
         box, box_from = validate.check_box(opts.box, "--box"), "--box"
+    elif opts.box == "auto" and alpha is None and box_start is not None:
+        from .auto_box import OVERLAP_SHARE, overlap_box
+        box = overlap_box(c2w, intr, frames[0][0].shape[1], frames[0][0].shape[0])
+        box_from = f"auto: the cube {OVERLAP_SHARE:.0%} of the views hold, round the cameras' look-at point"
     elif box_start is None:   # Blender: carved inside the NeRF-Synthetic box
         box = fit_box(alpha, c2w, intr)
         box_from = "carved from the masks" if alpha is not None else "the NeRF-Synthetic default"
@@ -215,20 +221,10 @@ def builtin_options(posed: PosedImages, opts: CaptureOptions) -> PosedImages:
     if opts.holdout is not None:
         train, test = split(len(c2w), opts.holdout)
         how = f"every {opts.holdout}-th frame" if opts.holdout else "none held out"
-    box, box_from = (validate.check_box(opts.box, "--box"), "--box") if opts.box is not None else \
+    box, box_from = (validate.check_box(opts.box, "--box"), "--box") if opts.box not in (None, "auto") else \
         (box.astype(np.float32), "the mesh's bounds")
     info = {"name": posed.name, "frames": len(c2w), "skipped": {}, "holdout": opts.holdout, "train": len(train),
             "test": 0 if opts.holdout == 0 else len(test), "split": how, "size": [posed.width, posed.height],
             "box": box.tolist(), "box_from": box_from, "up": [float(x) for x in up_vec], "up_from": up_from}
     return replace(posed, c2w=c2w.astype(np.float32), box=box, train=np.asarray(train), test=np.asarray(test),
                    info={**posed.info, "capture": info})
-
-
-def box_from_cameras(c2w: np.ndarray, scale: float = 1.0) -> np.ndarray:
-    """Cube around the point closest to all optical axes, `scale` times half the median camera distance wide."""
-    o, d = c2w[:, :3, 3].astype(np.float64), -c2w[:, :3, 2].astype(np.float64)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    proj = np.eye(3)[None] - d[:, :, None] * d[:, None, :]
-    centre = np.linalg.lstsq(proj.sum(0), np.einsum("nij,nj->i", proj, o), rcond=None)[0]
-    half = 0.5 * scale * np.median(np.linalg.norm(o - centre, axis=1))
-    return np.stack([centre - half, centre + half]).astype(np.float32)

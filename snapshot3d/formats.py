@@ -112,8 +112,8 @@ FILE_CODECS = (FILE_CODEC, "hinet-2", "hinet-1")  # the file codecs this build r
 # (which codec belongs to which medium, and what each carries: `snapshot3d.codecs.media`)
 MARK_CODECS = ("hinet-1", "hinet-2", "print-1", "hinet-3", "print-2")   # a pixel mark's codec byte indexes this (append only, never reorder)
 DEFAULT_MEDIUM = "print"      # a snapshot is made to be printed unless it is asked for as a file
-CALIB_CODEC = "calib-1"       # the QR codec id of the calibration chart (`sheet --calibration`): decode refuses it,
-                              # `snapshot3d calibrate` measures it (`scanner.chart`)
+CALIB_CODEC = "calib-2"       # the QR codec id of the calibration chart (`sheet --calibration`): decode refuses it,
+                              # `snapshot3d calibrate` measures it (`scanner.chart`); calib-1 is no longer read
 
 # --- the file medium's codec (issue 4) ---
 # The secret is the scene's planes, each channel spread over the whole wavelet grid of the snapshot

@@ -40,10 +40,13 @@ def test_decode_profile_writes_stage_shares(tmp_path):
     """`bench decode --profile`: each stage's median and share of the decode, and cProfile's listing."""
     from snapshot3d.bench.decode_profile import STAGES, profile_decode
 
-    doc = profile_decode(tmp_path, repeats=1, top=5)
+    doc = profile_decode(tmp_path, repeats=1, top=5, cold=1)
     # each share is rounded to 3 decimals, so their sum may exceed 1 by half a unit per stage
     assert set(doc["stages_share"]) == set(STAGES)
     assert 0.8 <= sum(doc["stages_share"].values()) <= 1.0 + 0.0005 * len(STAGES)
     assert doc["decode_ms_median"] > 0 and 0 < doc["first_view_ms_median"] <= doc["decode_ms_median"]
     assert len(doc["top_by_tottime"]) == 5 and json.loads((tmp_path / "decode_profile.json").read_text())["meta"]
     assert "cumulative" in (tmp_path / "decode_profile.txt").read_text()
+    cold = doc["cold"]  # one decode in a fresh process, as a user's first
+    assert set(cold["stages_ms"]) == set(STAGES) and 0 < cold["first_view_ms"] <= cold["decode_ms"]
+    assert (tmp_path / "decode_profile.png").stat().st_size > 10_000

@@ -59,6 +59,39 @@ def test_round_trip_each_preset(severity):
         assert {"mild": 0.30, "moderate": 0.22, "severe": 0.15}[severity] < prof["mtf50"] < 0.6
 
 
+@pytest.mark.parametrize("severity", ["mild", "moderate", "severe"])
+def test_band_gain_and_noise_match_the_codecs_carriers(severity):
+    """Per band, the chart's gain and noise (print_channel's terms) are what the print codec's own carriers
+    read at the chart's places through the same seed (bench.calibrate.codec_reference): gain within 10 %
+    (severe 20 %: its Y1 gains are 0.03-0.2), noise within 25 % (severe 35 %)."""
+    from snapshot3d.bench.calibrate import chart_capture, codec_reference
+
+    seed = 2
+    prof = calibrate_image(chart_capture(severity, seed)[0])
+    ref = codec_reference(severity, seed, np.random.default_rng(0))["places"]
+    g_tol, u_tol = {"severe": (0.20, 0.35)}.get(severity, (0.10, 0.25))
+    for b, g in ref["band_gain"].items():
+        got = prof["bands"][b]
+        assert abs(got["gain"] / g - 1) <= g_tol, (b, got["gain"], g)
+        assert abs(got["unit"] / ref["band_unit"][b] - 1) <= u_tol, (b, got["unit"], ref["band_unit"][b])
+    assert abs(prof["print_channel"]["unit"] / ref["unit"] - 1) <= u_tol
+    assert set(prof["print_channel"]) == {"gain", "unit"} and 0 < prof["print_channel"]["gain"] < 1
+
+
+def test_chart_of_another_version_is_refused(tmp_path):
+    """A calib-1 chart (+-1 carriers, read by no build since calib-2) gets one line saying to print a new one."""
+    from snapshot3d.scanner.qr import SheetMeta
+    from snapshot3d.scanner.sheet import render_sheet
+    from snapshot3d.scanner.simulate import simulate
+
+    assert chart_snapshot()[194:378, 6:190].std() == pytest.approx(20.4, abs=0.5)   # Gaussian carriers, std 0.08
+    sheet = render_sheet(chart_snapshot(), SheetMeta(codec="calib-1"), 2)
+    data, ext, _ = simulate(sheet, "none", 0)
+    with pytest.raises(UserError, match="another version") as e:
+        calibrate_image(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR))
+    assert "\n" not in str(e.value) and "calib-2" in str(e.value)
+
+
 def test_calibrate_cli_writes_a_profile_that_loads(chart_photo, tmp_path):
     out, rep = tmp_path / "profile.json", tmp_path / "report.json"
     r = run_cli("calibrate", str(chart_photo / "photo.png"), "-o", str(out), "--report", str(rep))
@@ -73,12 +106,18 @@ def test_profile_of_another_version_or_malformed(tmp_path, chart_photo):
     good = tmp_path / "good.json"
     assert run_cli("calibrate", str(chart_photo / "photo.png"), "-o", str(good)).returncode == 0
     data = json.loads(good.read_text())
+    assert data["print_channel"]["unit"] > 0 and all("unit" in v for v in data["bands"].values())
+    old = {k: v for k, v in data.items() if k != "print_channel"}   # a profile from before print_channel loads
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    assert "print_channel" not in load_profile(tmp_path / "old.json")
     cases = {"other.json": json.dumps({**data, "profile_version": PROFILE_VERSION + 1}),
              "text.json": "not json {", "list.json": "[1, 2]", "nofield.json": json.dumps({"profile_version": 1}),
              "nan.json": json.dumps({**data, "mtf50": float("nan")}),
-             "preset.json": json.dumps({**data, "nearest_preset": "awful"})}
+             "preset.json": json.dumps({**data, "nearest_preset": "awful"}),
+             "pc.json": json.dumps({**data, "print_channel": {"gain": 0.5, "unit": -1.0}})}
     expect = {"other.json": "version", "text.json": "not a channel profile", "list.json": "no profile_version",
-              "nofield.json": "malformed", "nan.json": "malformed", "preset.json": "unknown preset"}
+              "nofield.json": "malformed", "nan.json": "malformed", "preset.json": "unknown preset",
+              "pc.json": "malformed"}
     for name, text in cases.items():
         (tmp_path / name).write_text(text)
         with pytest.raises(UserError, match=expect[name]) as e:

@@ -36,7 +36,7 @@ def test_decode_example_photo_without_torch(tmp_path):
     assert set(rep["timings_ms"]) >= {"scan", "restore", "bake", "render", "first_view"}
     assert rep["decode_ms"] >= rep["timings_ms"]["render"] > 0
     q = rep["quality_estimate"]
-    assert rep["codec"] == formats.PRINT_CODEC and q["basis"] == "the codec's pilot carriers"
+    assert rep["codec"] == formats.PRINT_CODEC and q["basis"] == "the codec's pilot carriers and this scene's views"
     assert 0.05 < q["plane_rmse_expected"] < 0.5  # a moderate photo of a print: the pilots measure its noise
     assert 15 < q["restore_psnr_expected_db"] < 40 and q["calibration"]["held_out_rmse_db"] > 0
     mesh = trimesh.load(out / "mesh.glb", force="mesh")

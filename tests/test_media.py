@@ -169,7 +169,7 @@ def test_every_codec_embed_writes_ships_its_quality_calibration():
     """A sheet made with any codec `embed` writes decodes with an expected restore_psnr (bench decode
     writes the lines; a new codec without one would decode with the estimate null)."""
     from snapshot3d.viewer.quality import quality_estimate
-    for codec in (formats.PRINT_CODEC, formats.FILE_CODEC):
-        q = quality_estimate(codec, pilot_psnr=30.0, plane_rmse=0.1)
+    for codec in (formats.PRINT_CODEC, formats.FILE_CODEC):   # the print codec reads its views term
+        q = quality_estimate(codec, pilot_psnr=30.0, plane_rmse=0.1, views_psnr=27.0)
         assert q["restore_psnr_expected_db"] is not None and 10 < q["restore_psnr_expected_db"] < 60, codec
         assert q["calibration"]["held_out_rmse_db"] < 3.0, codec

@@ -62,7 +62,7 @@ def test_decode_photo_answers_scene_report_and_links(decoded):
     rep = body["report"]
     assert len(body["scene_id"]) == 16 and rep["source"] == "photo of a sheet" and rep["detected"] is True
     assert rep["medium"] == "print" and rep["quality_estimate"]["restore_psnr_expected_db"] > 18
-    assert set(rep["timings_ms"]) == {"scan", "restore", "bake"} and len(body["views"]) == rep["views"] == 20
+    assert set(rep["timings_ms"]) == {"scan", "restore", "bake", "quality"} and len(body["views"]) == rep["views"] == 20
     assert client.get(f"/v1/scenes/{body['scene_id']}").json()["report"] == rep
 
 

@@ -125,6 +125,21 @@ def test_client_render_matches_server_render(browser, base_url):
     assert errors == [], errors
 
 
+def test_moving_path_is_chosen_per_device_and_scored(browser, base_url):
+    """While a finger moves the page draws fewer rays (issue 39): the size comes from this GL's own frame rate
+    and `movingPsnr` scores it against the full frames (the same size scores as identical)."""
+    page, errors = _page(browser, base_url)
+    _upload(page, asset("example-photo.jpg"))
+    page.wait_for_function("snapshot3d.movingChosen", timeout=10000)
+    size = page.evaluate("snapshot3d.chooseMovingSize()")
+    assert 160 <= size <= 380, size
+    assert page.evaluate("snapshot3d.movingPsnr(380, 2)") > 100   # the full path against itself
+    half = page.evaluate("snapshot3d.movingPsnr(190, 2)")
+    assert 20 < half < 60, half                                      # softer, still the same scene
+    assert page.evaluate("[document.getElementById('view').width, snapshot3d.azimuth]") == [380, 0]
+    assert errors == [], errors
+
+
 def test_undecodable_photo_says_why(browser, base_url, tmp_path):
     grey = tmp_path / "wall.jpg"
     cv2.imwrite(str(grey), np.full((600, 800, 3), 128, np.uint8))

@@ -67,6 +67,8 @@ def decode_command(args) -> int:
           f"{r['timings_ms']['render']:.0f}); wrote {Path(args.output)}/")
     for line in _quality_lines(r["quality_estimate"]):
         print(line)
+    if (r.get("channel") or {}).get("advice"):
+        print(f"channel: {r['channel']['advice']}")
     return 0
 
 

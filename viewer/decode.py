@@ -3,12 +3,13 @@ snapshot file (or a copy of one that sharing re-encoded, resized or stripped of 
 
 `decode_photo` returns the views (N, size, size, 3) float32 RGB in [0, 1], the restored scene and a
 report with `detected`, `confidence`, `timings_ms` per stage, `decode_ms` (photo file to all views in
-memory) and a quality estimate that needs no ground truth (`viewer.quality`: the sheet's markers as a
-pilot signal, and the `restore_psnr` they predict)."""
+memory), a quality estimate that needs no ground truth (`viewer.quality`: the sheet's markers as a
+pilot signal, and the `restore_psnr` they predict) and the channel the print codec's pilots measured
+(`viewer.channel`: gain, noise, SNR, the nearest preset and advice; null values with a reason for a file codec)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -20,9 +21,11 @@ from snapshot3d.errors import UserError
 from snapshot3d.scene import Orbit, Scene, quantize_planes
 
 from .bake import Baked, bake_field
+from .channel import channel_report, px_per_pixel
 from .march import Frame
 from .media import restore_planes
 from .quality import quality_estimate
+from .quality_views import error_spectrum, views_psnr_expected
 from .render import RenderConfig, pad_planes, render_views
 from .runtime import field_models
 
@@ -119,10 +122,33 @@ class DecodedScene:
     planes: np.ndarray  # (3, C, R, R) float32 in [-1, 1], as restored (before quantisation)
     report: dict
     snapshot: np.ndarray  # (380, 380, 3) uint8 RGB: the capture the restore read (rectified and colour-corrected)
+    codec_info: dict = field(default_factory=dict)  # what the codec said of its reading (`media.restore_planes`)
 
 
-def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
-    """Scan (or read the snapshot file), restore and bake; the report has the timings of these stages."""
+def _views_psnr(scene: Scene, planes: np.ndarray, codec: str, info: dict) -> float | None:
+    """The print codec's `quality_views.views_psnr_expected` of restored planes (None for the file codec)."""
+    if CODEC_MEDIUM[codec] != "print":
+        return None
+    err = error_spectrum(codec, planes.shape[2], planes.shape[1], info["pilot_gain"], info["pilot_noise"],
+                         info["plane_rmse_expected"])
+    return views_psnr_expected(field_models(decoder=scene.decoder_version), planes, scene.box, scene.orbit, err)
+
+
+def _with_estimate(ds: "DecodedScene", timings: dict) -> dict:
+    """ds.report with the quality estimate's views term filled in, and its time as timings["quality"]."""
+    t0 = time.perf_counter()
+    q = ds.report["quality_estimate"]
+    views = _views_psnr(ds.scene, ds.planes, ds.report["codec"], ds.codec_info)
+    report = dict(ds.report, quality_estimate=quality_estimate(ds.report["codec"], q["pilot_psnr_db"],
+                                                               q["plane_rmse_expected"], views))
+    report["timings_ms"] = dict(timings, quality=round((time.perf_counter() - t0) * 1e3, 1))
+    return validate.finite_tree(report, "report")
+
+
+def decode_scene(path, cfg: RenderConfig = RenderConfig(), estimate: bool = True) -> DecodedScene:
+    """Scan (or read the snapshot file), restore and bake; the report has the timings of these stages.
+    `estimate`: also render the quality estimate's few small views (`viewer.quality_views`; `decode_photo`
+    does that after the views, so that they come first)."""
     t0 = time.perf_counter()
     res, snapshot, meta, source = read_input(path)
     t1 = time.perf_counter()
@@ -140,18 +166,23 @@ def decode_scene(path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
         "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3)},
         "codec": meta.codec, "medium": CODEC_MEDIUM[meta.codec],
         "quality_estimate": quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected")),
+        "channel": channel_report(meta.codec, snapshot, meta.planes, codec_info,
+                                  None if res is None else px_per_pixel(res.corners)),
         "planes": list(meta.planes), "decoder": scene.decoder_version, "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
         "scan": None if res is None else {k: v for k, v in res.report().items()
                                           if k in ("corners", "reprojection_px", "qr")},
     }
-    return DecodedScene(scene, baked, planes, validate.finite_tree(report, "report"), snapshot)
+    ds = DecodedScene(scene, baked, planes, validate.finite_tree(report, "report"), snapshot, codec_info)
+    if estimate:
+        ds.report = _with_estimate(ds, ds.report["timings_ms"])
+    return ds
 
 
 def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORBIT_SIZE,
                  cfg: RenderConfig = RenderConfig(), on_view=None) -> Decoded:
     t0 = time.perf_counter()
-    ds = decode_scene(path, cfg)
+    ds = decode_scene(path, cfg, estimate=False)
     t3 = time.perf_counter()
     c2w, intr = orbit_cameras(ds.scene.orbit, views, size)
     first = []
@@ -165,7 +196,7 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
                        on_view=_tick)
     t4 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
-    report = dict(ds.report, views=views, size=size, decode_ms=ms(t0, t4))
-    report["timings_ms"] = dict(ds.report["timings_ms"], render=ms(t3, t4),
-                                first_view=ms(t0, first[0]) if first else None)
+    report = _with_estimate(ds, dict(ds.report["timings_ms"], render=ms(t3, t4),
+                                     first_view=ms(t0, first[0]) if first else None))
+    report.update(views=views, size=size, decode_ms=ms(t0, t4))   # photo to views; the estimate comes after
     return Decoded(out, ds.scene, report, ds.baked)

@@ -15,6 +15,16 @@ def _out(p) -> None:
                                                "with --quick, so that a smoke run never overwrites the results)")
 
 
+def _through_print_options(p, seeds: int) -> None:
+    """The photos of `bench decoders` and `bench e2e` (`decoders.e2e_rows`): hosts, severities, seeds, views."""
+    p.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from codec training)")
+    p.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
+    p.add_argument("--severities", default="mild,moderate,severe", help="comma-separated physical severities")
+    p.add_argument("--seeds", type=int, default=seeds, help="simulated photos per severity and host")
+    p.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
+    p.add_argument("--size", type=int, default=96, help="orbit view size for restore_psnr")
+
+
 def _quick(p, **settings) -> None:
     """--quick: a smoke run of the benchmark with `settings` in place of the options given."""
     desc = ", ".join(f"--{k.replace('_', '-')} {v}" for k, v in settings.items())
@@ -59,6 +69,22 @@ def add_commands(sub) -> None:
     _quick(bf)
     bf.add_argument("--scenes", default="spot,lego", help="comma-separated bench scenes; a subset writes fit_<names>.*")
     bf.add_argument("--merge", action="store_true", help="only combine fit_<scene>.json files into fit.*")
+
+    bg = add(bsub, "capture-background", "synthetic captures (make-capture) fitted without masks on white, without "
+                                         "masks with --background outer, and with the true masks: the object's PSNR "
+                                         "in its true mask and the density outside it (issue 40 item 2)",
+             _run("snapshot3d.bench.capture_background", "bench_capture_background_command"))
+    _out(bg)
+    bg.add_argument("--meshes", default="spot", help="comma-separated built-in meshes")
+    bg.add_argument("--modes", default="white,outer,masked", help="comma-separated fits: white, outer, masked")
+    bg.add_argument("--size", type=int, default=128, help="capture width in pixels (height 3/4 of it)")
+    bg.add_argument("--views", type=int, default=48, help="capture frames (every 8th held out)")
+    bg.add_argument("--steps", type=int, default=300, help="fit steps")
+    bg.add_argument("--occ-warmup", type=int, default=32, help="fit steps before the first occupancy update")
+    bg.add_argument("--plane-res", type=int, default=64, help="plane resolution")
+    bg.add_argument("--plane-channels", type=int, default=8, help="plane channels")
+    bg.add_argument("--seed", type=int, default=0, help="capture and fit seed")
+    _quick(bg, size=48, views=8, steps=20)
 
     bv = add(bsub, "serve", "snapshot3d serve under concurrent uploads (answers, latency, memory, /render) and the "
                             "page in headless Chromium (first view, frame rate, screenshots)",
@@ -108,6 +134,11 @@ def add_commands(sub) -> None:
     _out(bh)
     bh.add_argument("--seeds", type=int, default=8, help="simulated photos per severity")
     bh.add_argument("--severities", default="jpeg75,mild,moderate,severe", help="comma-separated severities")
+    bh.add_argument("--real", action="store_true", help="MTF, noise and tone of real photos of printed ArUco "
+                    "boards beside simulated photos of the same boards per physical preset (--seeds each): "
+                    "channel_real.{json,csv,png}")
+    bh.add_argument("--photos", default=None, help="with --real: a folder of board photos "
+                    "(default ../shared/data/photos/aruco)")
     _quick(bh, seeds=1)
 
     bg = add(bsub, "print-digital", "the print medium's digital payload candidate (quantised planes, CRC, "
@@ -155,16 +186,25 @@ def add_commands(sub) -> None:
     bv.add_argument("--scenes", default="bench/models/spot-print.s3d,bench/models/spot-print-tri-dec-2.s3d,"
                                         "bench/models/lego-print-auto.s3d,bench/models/lego-print-tri-dec-2.s3d",
                     help="comma-separated scene files: one scene fitted for each decoder, named <scene>-...")
-    bv.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos (held out from codec training)")
-    bv.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
-    bv.add_argument("--severities", default="mild,moderate,severe", help="comma-separated physical severities")
-    bv.add_argument("--seeds", type=int, default=3, help="simulated photos per severity and host")
-    bv.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
-    bv.add_argument("--size", type=int, default=96, help="orbit view size for restore_psnr")
+    _through_print_options(bv, seeds=3)
     bv.add_argument("--search", default="bench/results/decoder_search.jsonl",
                     help="rows of the decoder search (JSON lines) to chart beside (empty: none)")
     _quick(bv, scenes="bench/models/spot-print.s3d", hosts="coffee", heldout=0, severities="moderate", seeds=1,
            views=2, size=48, search="")
+
+    be = add(bsub, "e2e", "what a print gives of a scene against the payload: e2e_psnr at held-out views per severity "
+                          "for scenes fitted at several plane sizes, beside the field alone and the capacity bound; "
+                          "a side-by-side per scene",
+             _run("snapshot3d.bench.e2e", "bench_e2e_command"))
+    _out(be)
+    be.add_argument("--medium", default="print", choices=["print"], help="the medium (the print medium only)")
+    be.add_argument("--scenes", default="bench/models/spot-print.s3d,bench/models/spot-r24c4.s3d,"
+                                        "bench/models/spot-r32c4.s3d,bench/models/spot-r48c4.s3d,"
+                                        "bench/models/lego-print-auto.s3d,bench/models/lego-print.s3d",
+                    help="comma-separated scene files named <scene>-...; the first of each scene is the side-by-side's")
+    _through_print_options(be, seeds=6)
+    _quick(be, scenes="bench/models/spot-print.s3d", hosts="coffee", heldout=0, severities="moderate", seeds=1,
+           views=2, size=48)
 
     bs = add(bsub, "decoder-search", "candidate shared decoders scored by what they fit: spot and lego at small "
                                      "plane sizes, field_psnr clean and with plane noise (JSON lines; for a GPU)",
@@ -255,6 +295,21 @@ def add_commands(sub) -> None:
                  "bundled host photos (held out from training)")
     _quick(bq, scenes="snapshot3d/assets/spot.s3d", hosts="coffee", seeds=1, size=48)
 
+    bqe = add(bsub, "quality", "the print decode's expected restore quality against the measured one, on scenes and "
+                               "plane sizes held out of its calibration; writes the calibration decode reads",
+              _run("snapshot3d.bench.quality", "bench_quality_command"))
+    _out(bqe)
+    bqe.add_argument("--fit-scenes", default="bench/models/spot-print.s3d,bench/models/lego-print.s3d",
+                     help="scenes the line is fitted on (photos in the calibration hosts)")
+    bqe.add_argument("--check-scenes", default="bench/models/lego-print-auto.s3d,bench/models/spot-r24c4.s3d,"
+                                               "bench/models/spot-r32c4.s3d,bench/models/spot-r48c4.s3d",
+                     help="scenes held out of the fit (photos in the held-out hosts)")
+    bqe.add_argument("--seeds", type=int, default=2, help="photos per scene, host and severity")
+    bqe.add_argument("--calibration-dir", default=None,
+                     help="where to write the line (default: the package's assets, which decode reads)")
+    _quick(bqe, seeds=1, fit_scenes="bench/models/spot-print.s3d", check_scenes="bench/models/lego-print-auto.s3d",
+           calibration_dir="bench/results/quick")
+
     bd = add(bsub, "decode", "torch-free decode of simulated photos: decode_ms per stage, restore_psnr, e2e_psnr; "
                              "a speed/accuracy sweep and its chart; each codec's quality estimate calibrated",
              _run("snapshot3d.bench.decode", "bench_decode_command"))
@@ -275,6 +330,8 @@ def add_commands(sub) -> None:
     bd.add_argument("--profile", action="store_true",
                     help="only profile the decode of the example photo: each stage's median time and share over "
                          "--repeats decodes, and cProfile's top functions (decode_profile.{json,txt})")
+    bd.add_argument("--cold", type=int, default=3, help="with --profile: also time this many decodes, each by "
+                                                        "`snapshot3d decode` in a fresh process (decode_profile.png)")
     _quick(bd, seeds=2, repeats=1, calib_seeds=1, calib_scenes="bench/models/spot-print.s3d",
            calibration_dir="bench/results/quick")
 
@@ -288,3 +345,16 @@ def add_commands(sub) -> None:
     bc.add_argument("--reference", action="store_true", help="print the presets' reference table "
                                                              "(scanner.calibrate.PRESET_REFERENCE) from seeds 100-111")
     _quick(bc, seeds=1)
+
+    bh = add(bsub, "decode-channel", "the channel report of print decodes (gain, noise, SNR, nearest preset, advice) "
+                                     "on simulated photos; restore_psnr beside its estimate (issue 38 item 4)",
+             _run("snapshot3d.bench.decode_channel", "bench_decode_channel_command"))
+    _out(bh)
+    bh.add_argument("--scenes", default="snapshot3d/assets/spot-print.s3d,bench/models/lego-print-auto.s3d",
+                    help="comma-separated print scene files")
+    bh.add_argument("--hosts", default="coffee,chelsea", help="comma-separated bundled host photos")
+    bh.add_argument("--seeds", type=int, default=3, help="photos per physical preset, scene and host (seeds 0..N-1)")
+    bh.add_argument("--size", type=int, default=128, help="orbit view size for restore_psnr")
+    bh.add_argument("--reference", action="store_true", help="print viewer.channel.CHANNEL_REFERENCE from seeds "
+                                                             "100-105 instead of scoring")
+    _quick(bh, seeds=1, hosts="chelsea")

@@ -13,7 +13,7 @@ __all__ = ["add_commands"]
 
 
 def add_commands(sub) -> None:
-    """Add fit, render, mesh and train to the top-level subparsers `sub`."""
+    """Add fit, render, mesh, make-capture and train to the top-level subparsers `sub`."""
     from snapshot3d.train.codec.config import CodecConfig  # torch-free dataclasses
     from snapshot3d.train.codec.print_config import PrintCodecConfig
     from snapshot3d.train.field.config import DecoderConfig, FitConfig
@@ -30,6 +30,8 @@ def add_commands(sub) -> None:
     f.add_argument("--medium", default=None, choices=MEDIA,
                    help="with --budget auto: the medium the scene will travel through; its codec's loss at each "
                         "payload counts (print: a photographed print carries far less, so smaller planes win)")
+    f.add_argument("--channel", help="with --budget auto --medium print: predict through the channel measured by "
+                                     "`snapshot3d calibrate` (a profile .json) instead of the `moderate` preset's")
     f.add_argument("--downscale", type=int, default=1, help="divide image size by this on load")
     f.add_argument("--max-size", type=int, default=800,
                    help="then shrink images so that the longer side is at most this many pixels (not builtin scenes)")
@@ -59,6 +61,14 @@ def add_commands(sub) -> None:
     m.add_argument("scene", help="scene file (.s3d)")
     m.add_argument("-o", "--output", required=True, help="mesh file (.glb or .ply)")
     m.add_argument("--res", type=int, default=128, help="grid resolution per axis")
+
+    from snapshot3d.make_capture_config import SynthCaptureConfig  # torch- and numpy-free
+    mc = _add(sub, "make-capture", "render a real-looking capture of a built-in mesh (nerfstudio transforms.json: a "
+                                   "photo room, lens, exposure, pose noise) with ground truth aside in DIR/gt",
+              _run("snapshot3d.make_capture", "make_capture_command"))
+    mc.add_argument("scene", help="builtin:NAME (procedural, spot, duck, teapot, bunny, suzanne)")
+    mc.add_argument("-o", "--output", required=True, help="folder to create (absent or empty); see docs/capture.md")
+    add_dataclass_options(mc, SynthCaptureConfig)
 
     t = _add(sub, "train", "train the shared models (resumable; their weights ship in the package)", None)
     tsub = t.add_subparsers(dest="what", required=True, metavar="WHAT")

@@ -30,8 +30,10 @@ def add_commands(sub) -> None:
     m.add_argument("sheet", help="sheet written by `snapshot3d sheet` (.png, or the .pdf with its .png beside it)")
     m.add_argument("-o", "--output", required=True, help="photo to write (.jpg; .png keeps the channel's JPEG "
                                                          "losslessly; severity none needs .png)")
-    m.add_argument("--severity", default="mild", choices=SEVERITIES,
-                   help="channel preset (parameters in scanner/presets.py)")
+    m.add_argument("--severity", default=None, choices=SEVERITIES,
+                   help="channel preset (parameters in scanner/presets.py; default mild)")
+    m.add_argument("--profile", help="photograph through a measured channel instead of a preset: a channel profile "
+                                     "(.json) from `snapshot3d calibrate`")
     m.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same photo")
     m.add_argument("--truth", help="write the true snapshot corners and the preset's parameters here (JSON)")
 

@@ -74,13 +74,15 @@ def choose_rung(rungs: list[dict], tolerance_db: float = 0.5, key: str = "field_
 
 
 def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, tolerance_db: float = 0.5,
-               finetune_fraction: float = 0.4, log=print, progress_factory=None, device=None, medium: str | None = None):
+               finetune_fraction: float = 0.4, log=print, progress_factory=None, device=None, medium: str | None = None,
+               channel=None):
     """Returns (chosen rung index, rungs): each rung a dict with plane_res, plane_channels, scene_kb,
     field_psnr, field_ssim, fit_seconds and its `codes`; with a `medium`, also codec_psnr (what its codec
     costs this rung) and e2e_expected, by which the rung is chosen (print: predicted from the rung's own
-    planes, the curve's value kept as codec_psnr_curve)."""
+    planes through `channel`, a `print_channel.ChannelModel`, by default the `moderate` one of budget-curves.json
+    (a measured one: `scanner.profile_channel.profile_channel`); the curve's value kept as codec_psnr_curve)."""
     ladder = ladder or ladder_for(medium)
-    channel = print_channel() if medium == "print" else None
+    channel = (channel or print_channel()) if medium == "print" else None
     from snapshot3d.scene import Orbit, Scene
     hull = hull_grid(posed)
     rungs, big = [], None

@@ -52,11 +52,13 @@ def _default_orbit(posed) -> Orbit:
 
 
 def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int = 1, checkpoint=None,
-              size: int = 200, quiet: bool = False, device=None, medium: str | None = None, capture=None):
+              size: int = 200, quiet: bool = False, device=None, medium: str | None = None, capture=None,
+              channel=None):
     """Load (`capture`: snapshot3d.capture.CaptureOptions, the split, box, up axis and size limit), fit (on
     `device`: a torch.device, a --device name, or None: the CPU) and evaluate. Returns (Scene, report dict,
     held-out renders). The capture is loaded before torch is imported, so that a wrong path fails at once;
-    one line says what was read."""
+    one line says what was read. `channel`: the print channel's model the budget predicts with (None: the
+    `moderate` one)."""
     from snapshot3d.capture import describe
     from snapshot3d.loaders import load_scene
     from snapshot3d.scene import dequantize_planes
@@ -78,8 +80,11 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     log = (lambda *_: None) if quiet else print
     bars = None if quiet else _bar
     report = {}
+    if cfg.background == "outer" and read and str(read.get("box_from", "")).startswith("auto"):
+        posed, report["background"] = _tightened(posed, decoder, cfg, device, quiet)
     if budget == "auto":
-        chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device, medium=medium)
+        chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device, medium=medium,
+                                   channel=channel)
         codes = rungs[chosen]["codes"]
         ev = {k: rungs[chosen][k] for k in ("field_psnr", "field_ssim")}
         steps = cfg.steps
@@ -110,6 +115,24 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     return scene, report, ev["renders"]
 
 
+def _tightened(posed, decoder, cfg, device, quiet: bool):
+    """`posed` in the automatic box tightened from a short fit's density (train/field/box_tighten.py), its
+    capture account updated; and what the tightening found."""
+    from dataclasses import replace
+
+    from .box_tighten import tighten_box
+    box, info = tighten_box(posed, decoder, cfg, device)
+    read = posed.info["capture"]
+    ground = f", the ground at z = {info['ground_z']:.3g}" if info["ground_z"] is not None else ""
+    read.update(box=box.tolist(), box_from=read["box_from"] + f"; tightened from {info['prefit_steps']} steps' "
+                f"density{ground}")
+    if not quiet:
+        lo, hi = (", ".join(f"{float(x):.3g}" for x in corner) for corner in box)
+        print(f"box ({lo})..({hi}) (tightened from {info['prefit_steps']} steps' density{ground}, "
+              f"{info['prefit_seconds']:.0f} s)")
+    return replace(posed, box=box), info
+
+
 def fit_command(args) -> int:
     from snapshot3d.capture import CaptureOptions, parse_box, parse_up
     cfg = check_fit_config(FitConfig(**{k: getattr(args, k) for k in FitConfig.__dataclass_fields__}))
@@ -124,10 +147,16 @@ def fit_command(args) -> int:
     if args.medium and args.budget != "auto":
         raise UserError("--medium chooses the plane size with --budget auto; with --budget fixed give --plane-res "
                         "and --plane-channels")
-    capture = CaptureOptions(holdout=getattr(args, "holdout", None), box=parse_box(getattr(args, "box", None)),
+    channel, channel_info = _channel_from_profile(getattr(args, "channel", None), args.medium)
+    box = parse_box(getattr(args, "box", None))
+    if box is None and cfg.background == "outer":   # a room around the object: a box from the cameras' overlap
+        box = "auto"
+    capture = CaptureOptions(holdout=getattr(args, "holdout", None), box=box,
                              up=parse_up(getattr(args, "up", None)), max_size=getattr(args, "max_size", None))
     scene, report, _ = fit_scene(args.scene, cfg, args.budget, args.downscale, ckpt, size=args.size,
-                                 device=args.device, medium=args.medium, capture=capture)
+                                 device=args.device, medium=args.medium, capture=capture, channel=channel)
+    if channel_info is not None:
+        report["channel"] = channel_info
     throughput = report.pop("_throughput", None)
     save_scene(scene, out)
     if ckpt is not None and ckpt.exists():
@@ -139,6 +168,25 @@ def fit_command(args) -> int:
     if args.medium is None and (hint := payload_hint(formats.DEFAULT_MEDIUM, scene)) is not None:
         print(f"{hint} (embed makes a print unless given --medium file)")   # what plain fit, then embed, would lose
     return 0
+
+
+def _channel_from_profile(path, medium):
+    """(ChannelModel, report entry) from `fit --channel profile.json`, printed in one line; (None, None)
+    without --channel. UserError for a profile that does not load, or --channel without --medium print."""
+    if path is None:
+        return None, None
+    if medium != "print":
+        raise UserError("--channel gives the print channel the budget predicts with: use it with --budget auto "
+                        "--medium print")
+    from snapshot3d.scanner.calibrate import load_profile
+    from snapshot3d.scanner.profile_channel import profile_channel
+
+    from .curves import print_channel
+
+    model, info = profile_channel(load_profile(path), print_channel())
+    print(f"channel: {Path(path).name}, like {info['nearest_preset']} (severity {info['severity_position']:.2f} on "
+          f"mild 0, moderate 1, severe 2): gain {model.gain:.3f}, noise {model.unit:.3g} per carrier")
+    return model, {"profile": Path(path).name, **info}
 
 
 def render_scene(scene: Scene, views: int, size: int, show_progress: bool = True) -> np.ndarray:

@@ -41,6 +41,16 @@ class FitConfig:
     decoder: str = config_field(formats.DECODER_VERSION, "shared decoder version to fit for: "
                                 + ", ".join(formats.DECODERS) + " (docs/fitting.md)")
     checkpoint_every: int = config_field(250, "steps between checkpoints")
+    background: str = config_field("white", "what the rays end on: white (the snapshot's background; captures "
+                                   "with masks or on white), or outer: a coarse contracted field outside the box and "
+                                   "a colour per direction, fitted with the planes and never carried in the snapshot "
+                                   "(captures of a room without masks; the box is then found from the cameras' "
+                                   "overlap and the density, train/field/background.py)")
+    background_res: int = config_field(48, "with --background outer: cells per axis of the outer field's grid")
+    background_samples: int = config_field(24, "with --background outer: outer-field samples per ray before the "
+                                           "box and as many after it")
+    background_lr: float = config_field(0.05, "with --background outer: the outer field's learning rate (decayed as "
+                                        "the planes')")
 
 
 @dataclass
@@ -77,6 +87,10 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
             and 0 <= cfg.min_transmittance < 1 and cfg.channel_noise >= 0):
         problems.append("--qat-fraction, --channel-fraction and --fg-fraction must be in [0, 1], "
                         "--min-transmittance in [0, 1), --channel-noise >= 0")
+    if cfg.background not in ("white", "outer"):
+        problems.append(f"--background must be white or outer, not {cfg.background!r}")
+    if cfg.background_res < 4 or cfg.background_samples < 2 or not cfg.background_lr > 0:
+        problems.append("--background-res must be >= 4, --background-samples >= 2, --background-lr > 0")
     if cfg.decoder not in formats.DECODERS:
         problems.append(f"--decoder must be one of {', '.join(formats.DECODERS)}, not {cfg.decoder!r}")
     if problems:

@@ -45,6 +45,9 @@ class FitState:
     train_seconds: float = 0.0
     channel: tuple | None = None
     """(D, a, s) of `channel_fit.response_tensors` when cfg.channel_fraction > 0"""
+    background: torch.nn.Module | None = None
+    """`background.OuterField` with cfg.background "outer" (never written to the snapshot), else None"""
+    bg_opt: torch.optim.Optimizer | None = None
 
 
 @dataclass
@@ -74,8 +77,13 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
     planes.to(device)
     occ = OccupancyGrid(hull=hull if hull is not None else hull_grid(posed)).to(device)
     opt = torch.optim.Adam(planes.parameters(), lr=cfg.lr)
+    bg = bg_opt = None
+    if cfg.background == "outer":
+        from .background import OuterField
+        bg = OuterField(cfg.background_res).to(device)
+        bg_opt = torch.optim.Adam(bg.parameters(), lr=cfg.background_lr)
     return FitState(planes, occ, frame, make_rays(posed, posed.train, frame).to(device), opt,
-                    channel=new_state_channel(cfg, device))
+                    channel=new_state_channel(cfg, device), background=bg, bg_opt=bg_opt)
 
 
 def new_state_channel(cfg: FitConfig, device=None) -> tuple | None:
@@ -119,6 +127,9 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     t0 = time.perf_counter()
     for g in st.opt.param_groups:
         g["lr"] = lr_at(cfg, st.step)
+    if st.bg_opt is not None:
+        for g in st.bg_opt.param_groups:
+            g["lr"] = lr_at(cfg, st.step) * cfg.background_lr / cfg.lr
     o, d, target = st.bank.batch(cfg.batch_rays, cfg.fg_fraction, gen)
     planes = st.planes.planes
     if st.channel is not None and st.step >= cfg.steps * (1 - cfg.channel_fraction):
@@ -131,8 +142,14 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     if plane_noise > 0:
         planes = planes + plane_noise * torch.randn(planes.shape, generator=gen).to(planes.device)
     occ = st.occ.occ if cfg.occupancy else None
-    color, _, n_samples = render_rays(planes, decoder, st.frame, occ, o, d, jitter=True, generator=gen,
-                                      min_transmittance=cfg.min_transmittance)
+    if st.background is not None:
+        from .background import render_with_background
+        color, _, n_samples = render_with_background(planes, decoder, st.frame, occ, st.background, o, d,
+                                                     cfg.background_samples, jitter=True, generator=gen,
+                                                     min_transmittance=cfg.min_transmittance)
+    else:
+        color, _, n_samples = render_rays(planes, decoder, st.frame, occ, o, d, jitter=True, generator=gen,
+                                          min_transmittance=cfg.min_transmittance)
     st.samples += n_samples
     mse = torch.mean((color - target) ** 2)
     loss = mse + cfg.tv_weight * _tv(st.planes.planes) if cfg.tv_weight else mse
@@ -141,8 +158,12 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     st.opt.zero_grad(set_to_none=True)
     if extra_params_opt is not None:
         extra_params_opt.zero_grad(set_to_none=True)
+    if st.bg_opt is not None:
+        st.bg_opt.zero_grad(set_to_none=True)
     loss.backward()
     st.opt.step()
+    if st.bg_opt is not None:
+        st.bg_opt.step()
     if extra_params_opt is not None:
         extra_params_opt.step()
     st.planes.clamp_()
@@ -158,7 +179,9 @@ def _save_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, s
     tmp = path.with_name(path.name + ".partial")
     torch.save({"cfg": asdict(cfg), "scene": scene, "step": st.step, "planes": st.planes.state_dict(), "occ": st.occ.state_dict(),
                 "opt": st.opt.state_dict(), "gen": gen.get_state(), "seconds": st.train_seconds,
-                "rays": st.rays, "samples": st.samples}, tmp)
+                "rays": st.rays, "samples": st.samples,
+                **({"background": st.background.state_dict(), "bg_opt": st.bg_opt.state_dict()}
+                   if st.background is not None else {})}, tmp)
     tmp.replace(path)
 
 
@@ -171,6 +194,8 @@ def _load_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, s
                         "delete it or fit with the same settings")
     st.planes.load_state_dict(ck["planes"]), st.occ.load_state_dict(ck["occ"]), st.opt.load_state_dict(ck["opt"])
     gen.set_state(ck["gen"])
+    if st.background is not None:
+        st.background.load_state_dict(ck["background"]), st.bg_opt.load_state_dict(ck["bg_opt"])
     st.step, st.train_seconds, st.rays, st.samples = ck["step"], ck["seconds"], ck["rays"], ck["samples"]
     return True
 

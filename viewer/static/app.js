@@ -6,12 +6,14 @@
 (() => {
   const $ = (id) => document.getElementById(id);
   const state = { mode: null, sceneId: null, header: null, azimuth: 0, elevation: 20, distance: 1, radius: 1,
-                  frames: 0, ready: false, error: null, firstViewMs: null };
+                  frames: 0, ready: false, error: null, firstViewMs: null, movingSize: 190, movingChosen: false };
   window.snapshot3d = state;
   let renderer = null, dirty = false, started = 0, moving = 0, settle = null;
-  const FULL = 380, MOVING = 190;  // drawing-buffer size at rest, and while a finger moves (4x fewer rays)
+  const FULL = 380, MOVING_MIN = 160, TARGET_FPS = 30;
+  // drawing-buffer size at rest (FULL), and while a finger moves (state.movingSize): chosen per device when a
+  // scene opens (chooseMovingSize), FULL where this GPU draws FULL at TARGET_FPS, else fewer rays
 
-  // while the pose changes, draw at MOVING resolution; 200 ms after the last change, once more at FULL
+  // while the pose changes, draw at state.movingSize; 200 ms after the last change, once more at FULL
   function interacting() {
     moving = performance.now();
     clearTimeout(settle);
@@ -49,7 +51,7 @@
   function drawNow() {
     dirty = false;
     if (state.mode === "webgl2") {
-      const canvas = $("view"), px = moving ? MOVING : FULL;
+      const canvas = $("view"), px = moving ? state.movingSize : FULL;
       if (canvas.width !== px) { canvas.width = px; canvas.height = px; }
       renderer.draw(state.azimuth, state.elevation, state.distance);
       state.frames++;
@@ -57,6 +59,10 @@
       fetchFrame();
     }
     if (state.firstViewMs === null) state.firstViewMs = Math.round(performance.now() - started);
+    if (state.mode === "webgl2" && !state.movingChosen) {  // after the first view is on screen, not before it
+      state.movingChosen = true;
+      setTimeout(chooseMovingSize, 50);
+    }
   }
 
   // fallback: one server frame in flight at a time, always for the latest pose
@@ -79,6 +85,7 @@
     const canvas = $("view");
     renderer = grid ? S3DGL.create(canvas, grid) : null;
     state.mode = renderer ? "webgl2" : "frames";
+    state.movingChosen = false;
     canvas.hidden = state.mode !== "webgl2";
     $("frame").hidden = state.mode !== "frames";
     $("hint").hidden = false;
@@ -96,6 +103,11 @@
       el.classList.toggle("poor", q.restore_psnr_expected_db < 22);
     } else {
       el.textContent = "Expected quality: no estimate for this kind of input.";
+    }
+    const ch = body.report.channel || {};   // the pilots' channel (print codecs only): nearest preset and advice
+    if (ch.advice) {
+      const line = ch.advice.replace(/`/g, "");
+      el.textContent += ` ${line.charAt(0).toUpperCase()}${line.slice(1)}.`;
     }
     const l = $("links");
     l.hidden = false;
@@ -209,6 +221,54 @@
     canvas.width = canvas.height = FULL;
     renderer.draw(state.azimuth, state.elevation, state.distance);
     return fps;
+  };
+  // the moving size from this device's own frame rate at FULL (3 finished frames): the square that
+  // keeps TARGET_FPS if time goes with the pixel count, 10% to spare, between MOVING_MIN and FULL
+  function chooseMovingSize() {
+    if (state.mode !== "webgl2") return null;
+    state.measureFps(1, FULL);  // a first frame may still compile the shader
+    const fps = state.measureFps(3, FULL);
+    const px = Math.round(FULL * Math.sqrt(Math.min(1, fps / TARGET_FPS)) * (fps >= TARGET_FPS ? 1 : 0.9));
+    state.movingSize = Math.max(MOVING_MIN, Math.min(FULL, px));
+    return state.movingSize;
+  }
+  state.chooseMovingSize = chooseMovingSize;
+
+  // (H, W) RGBA bytes of a frame drawn at size x size (readPixels: rows bottom-up)
+  function pixels(size, azimuth) {
+    const gl = renderer.gl, canvas = $("view");
+    canvas.width = canvas.height = size;
+    renderer.draw(azimuth, state.elevation, state.distance);
+    const out = new Uint8Array(4 * size * size);
+    gl.readPixels(0, 0, size, size, gl.RGBA, gl.UNSIGNED_BYTE, out);
+    return out;
+  }
+
+  // PSNR (dB, RGB) of the moving path against the full one: frames drawn at `size`, scaled up bilinearly to
+  // FULL as the page's canvas is (CSS smoothing), against frames drawn at FULL; the median over n poses
+  state.movingPsnr = (size = state.movingSize, n = 6) => {
+    if (state.mode !== "webgl2") return null;
+    const out = [], s = size / FULL;
+    for (let k = 0; k < n; k++) {
+      const az = state.azimuth + k * (360 / n), full = pixels(FULL, az), small = pixels(size, az);
+      let se = 0;
+      for (let y = 0; y < FULL; y++) {
+        const fy = Math.min(Math.max((y + 0.5) * s - 0.5, 0), size - 1), y0 = Math.min(fy | 0, size - 2), wy = fy - y0;
+        for (let x = 0; x < FULL; x++) {
+          const fx = Math.min(Math.max((x + 0.5) * s - 0.5, 0), size - 1), x0 = Math.min(fx | 0, size - 2), wx = fx - x0;
+          const i00 = 4 * (y0 * size + x0), i01 = i00 + 4, i10 = i00 + 4 * size, i11 = i10 + 4, j = 4 * (y * FULL + x);
+          for (let c = 0; c < 3; c++) {
+            const v = (1 - wy) * ((1 - wx) * small[i00 + c] + wx * small[i01 + c]) + wy * ((1 - wx) * small[i10 + c] + wx * small[i11 + c]);
+            se += (v - full[j + c]) ** 2;
+          }
+        }
+      }
+      out.push(10 * Math.log10((255 * 255) / Math.max(se / (3 * FULL * FULL), 1e-10)));
+    }
+    $("view").width = $("view").height = FULL;
+    renderer.draw(state.azimuth, state.elevation, state.distance);
+    out.sort((a, b) => a - b);
+    return out[out.length >> 1];
   };
   state.pose = (azimuth, elevation, distance) => {
     state.azimuth = azimuth; state.elevation = elevation; state.distance = distance ?? state.radius;

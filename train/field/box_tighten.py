@@ -1,0 +1,76 @@
+"""The automatic box tightened from the learned density (fit --background outer with --box auto): a short fit
+with the background model in the box the cameras' overlap gives (`snapshot3d/auto_box.py`), then, from the
+planes' density on a grid over that box, the ground, when most cameras look down (`box_from_density`): the box
+is cut at its top, so that the floor is left to the background model and the planes hold what stands on it. The
+fit then starts again in the new box. (Tightening the sides and the top from the density too was tried: after a
+short fit the density is too diffuse to cut them without cutting the object.)"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from snapshot3d.posed import PosedImages
+
+from .config import FitConfig
+from .field import decode, sample_planes
+from .sampler import BoxFrame
+
+__all__ = ["tighten_box", "box_from_density", "PREFIT_FRACTION"]
+
+PREFIT_FRACTION = 0.3   # of the fit's steps, spent on the short fit in the first box
+GRID = 64
+GROUND_RATIO = 2.0      # a ground layer's mean opacity over the median layer's
+TOP_SHARE = 0.8
+GROUND_COVER = 0.5
+
+
+def box_from_density(alpha: np.ndarray, box: np.ndarray, looks_down: bool) -> tuple[np.ndarray, float | None]:
+    """alpha (G, G, G) [ix, iy, iz] opacity over one cell of a grid over world `box` (2, 3) -> the box (2, 3)
+    float32 cut at the ground, and the ground's height (None when not looked for or not found). The ground is the
+    highest layer of the lower half within TOP_SHARE of the most opacity there, when that most is more than
+    GROUND_RATIO times the median layer's and the layer is denser than GROUND_RATIO times the median cell over
+    more than GROUND_COVER of the footprint: a floor spans the whole footprint, an object a part of it."""
+    out = box.astype(np.float32).copy()
+    if not looks_down:
+        return out, None
+    g = alpha.shape[2]
+    layers = alpha.mean(axis=(0, 1))
+    lower = layers[:g // 2]
+    if not lower.max() > GROUND_RATIO * max(float(np.median(layers)), 1e-6):
+        return out, None
+    k = int(np.nonzero(lower >= TOP_SHARE * lower.max())[0].max())   # the top of a floor that is a slab
+    if not np.mean(alpha[:, :, k] > GROUND_RATIO * max(float(np.median(alpha)), 1e-6)) > GROUND_COVER:
+        return out, None
+    ground = float(box[0, 2] + (k + 1) * (box[1, 2] - box[0, 2]) / g)
+    out[0, 2] = ground
+    return out, ground
+
+
+@torch.no_grad()
+def _cell_alpha(planes: torch.Tensor, decoder, box: np.ndarray, g: int = GRID) -> np.ndarray:
+    """(g, g, g) opacity of one cell of the planes over `box` at the cells' centres."""
+    frame = BoxFrame.from_box(box, planes.device)
+    t = (np.arange(g) + 0.5) / g * 2 - 1
+    unit = torch.from_numpy(np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3).astype(np.float32))
+    sigma = torch.cat([decode(sample_planes(planes, u.to(planes.device)), decoder)[0] for u in unit.split(1 << 16)])
+    cell_q = float((2 * frame.half_unit / g).mean())
+    return (1 - torch.exp(-sigma * cell_q)).cpu().numpy().reshape(g, g, g)
+
+
+def tighten_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tuple[np.ndarray, dict]:
+    """The box of `posed` tightened from a short fit with the background model (PREFIT_FRACTION of cfg.steps,
+    at least 10) -> (box (2, 3) float32 world, info for the report)."""
+    from .fit import fit
+    t0 = time.perf_counter()
+    pre = replace(cfg, steps=max(10, int(cfg.steps * PREFIT_FRACTION)), background="outer", qat_fraction=0.0,
+                  channel_fraction=0.0)
+    res = fit(posed, decoder, pre, device=device)
+    looks_down = bool(np.mean(-posed.c2w[posed.train, 2, 2] < 0) > 0.5)   # optical axes (-z) pointing down
+    alpha = _cell_alpha(res.state.planes.planes.detach(), decoder, posed.box)
+    box, ground = box_from_density(alpha, np.asarray(posed.box, np.float64), looks_down)
+    info = {"first_box": np.round(posed.box, 4).tolist(), "ground_z": None if ground is None else round(ground, 4),
+            "prefit_steps": pre.steps, "prefit_seconds": round(time.perf_counter() - t0, 1)}
+    return box, info
