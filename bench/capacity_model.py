@@ -40,7 +40,7 @@ NOISE_SIGMAS = (0.004, 0.01, 0.02, 0.04, 0.07, 0.1, 0.15, 0.2, 0.3, 0.45)
 OPPONENT = np.array([[1, 1, 1], [1, -1, 0], [1, 1, -2]], np.float64) / np.sqrt([[3.0], [2.0], [6.0]])
 
 
-def _haar(x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+def haar(x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
     """(h, w) -> LL (h/2, w/2) and the three detail bands, orthonormal."""
     a, b, c, d = x[0::2, 0::2], x[0::2, 1::2], x[1::2, 0::2], x[1::2, 1::2]
     return (a + b + c + d) / 2, [(a - b + c - d) / 2, (a + b - c - d) / 2, (a - b - c + d) / 2]
@@ -57,7 +57,7 @@ def subbands(img: np.ndarray, levels: int = LEVELS) -> list[np.ndarray]:
     for c in range(3):
         cur, bands = opp[..., c], []
         for _ in range(levels):
-            cur, det = _haar(cur)
+            cur, det = haar(cur)
             bands += [d.ravel() for d in det]
         out += bands + [cur.ravel()]
     return out

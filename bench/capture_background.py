@@ -21,12 +21,30 @@ from snapshot3d.train.field.config import FitConfig
 
 from .common import run_metadata, write_rows
 
-__all__ = ["MODES", "fit_and_score", "bench_capture_background_command"]
+__all__ = ["MODES", "fit_and_score", "bench_capture_background_command", "bench_fit_command"]
 
-# mode: (file read, background, box)
-MODES = {"white": ("transforms.json", "white", None),
-         "outer": ("transforms.json", "outer", "auto"),
-         "masked": ("gt/transforms_masked.json", "white", None)}
+# the background model's regularisers, all off: --background outer as first landed
+PLAIN = {"distortion_weight": 0.0, "opacity_weight": 0.0, "opacity_entropy": False, "wall_weight": 0.0,
+         "floor_weight": 0.0, "tighten_sides": False}
+_SIDES_WALLS = {**PLAIN, "tighten_sides": True, "wall_weight": 0.3}
+# mode: (file read, background, box, FitConfig fields over the bench's); `outer` is --background outer with its
+# defaults, the other outer-* modes are the candidates against floaters (docs/capture.md), kept as rows
+MODES = {"white": ("transforms.json", "white", None, {}),
+         "outer": ("transforms.json", "outer", "auto", {}),
+         "outer-plain": ("transforms.json", "outer", "auto", PLAIN),
+         "outer-distortion": ("transforms.json", "outer", "auto", {**PLAIN, "distortion_weight": 0.001}),
+         "outer-entropy": ("transforms.json", "outer", "auto",
+                           {**PLAIN, "opacity_weight": 0.01, "opacity_entropy": True}),
+         "outer-opacity": ("transforms.json", "outer", "auto", {**PLAIN, "opacity_weight": 0.1}),
+         "outer-walls": ("transforms.json", "outer", "auto", {**PLAIN, "wall_weight": 1.0}),
+         "outer-sides": ("transforms.json", "outer", "auto", {**PLAIN, "tighten_sides": True}),
+         "outer-sides-walls": ("transforms.json", "outer", "auto", _SIDES_WALLS),
+         "outer-sides-walls-floor": ("transforms.json", "outer", "auto", {**_SIDES_WALLS, "floor_weight": 1.0}),
+         "masked": ("gt/transforms_masked.json", "white", None, {})}
+# `bench fit --captures` (issue 40 item 4): this bench with these settings
+CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size": 128, "views": 48, "steps": 150,
+                    "occ_warmup": 32, "plane_res": 64, "plane_channels": 8, "seed": 0}
+CAPTURE_QUICK = {"size": 48, "views": 8, "steps": 20}
 
 
 def fit_and_score(cap: Path, mode: str, cfg: FitConfig) -> dict:
@@ -39,9 +57,9 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig) -> dict:
     from snapshot3d.train.field.decoder import load_decoder
     from snapshot3d.train.field.object_score import score_object
 
-    name, background, box = MODES[mode]
+    name, background, box, fields = MODES[mode]
     t0 = time.perf_counter()
-    scene, report, _ = fit_scene(str(cap / name), replace(cfg, background=background), quiet=True,
+    scene, report, _ = fit_scene(str(cap / name), replace(cfg, background=background, **fields), quiet=True,
                                  capture=CaptureOptions(up=(0.0, 0.0, 1.0), box=box))
     seconds = time.perf_counter() - t0
     truth = load_scene(str(cap / "gt/transforms_masked.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
@@ -52,7 +70,22 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig) -> dict:
             "box_from": report.get("capture", {}).get("box_from"), **report.get("background", {})}
 
 
+def bench_fit_command(args) -> int:
+    """`snapshot3d bench fit`: with --captures, this bench at CAPTURE_DEFAULTS (CAPTURE_QUICK with --quick);
+    else `bench/fit.py`'s."""
+    if not getattr(args, "captures", False):
+        from .fit import bench_fit_command as fit_command
+        return fit_command(args)
+    for k, v in {**CAPTURE_DEFAULTS, **(CAPTURE_QUICK if args.quick else {})}.items():
+        setattr(args, k, v)
+    return bench_capture_background_command(args)
+
+
 def bench_capture_background_command(args) -> int:
+    for mode in args.modes.split(","):
+        if mode not in MODES:
+            from snapshot3d.errors import UserError
+            raise UserError(f"--modes: unknown fit {mode!r} (choose from {', '.join(MODES)})")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cfg = FitConfig(steps=args.steps, plane_res=args.plane_res, plane_channels=args.plane_channels, seed=args.seed,

@@ -17,6 +17,9 @@ decodes the first layers only. The reader weighs each carrier by the gain and th
 measure (soft values = log-likelihood ratios up to a factor), sums the repetitions, runs the Viterbi
 decoder and keeps layers up to the first whose CRC fails.
 
+The near-capacity candidate on the same carriers (IRA-LDPC layers, soft BP decoding, an entropy-coded transform
+coder) is `bench.digital_ldpc`.
+
 Layouts: planes (3, C, R, R) float in [-1, 1]; snapshot (380, 380, 3) uint8 RGB; bits uint8 0/1."""
 from __future__ import annotations
 
@@ -30,7 +33,7 @@ import numpy as np
 from snapshot3d.codecs import print_carriers, print_embed, print_read, print_source
 from snapshot3d.scanner.pixelmeta import conv_encode, viterbi
 
-__all__ = ["DigitalDesign", "DESIGN", "embed_digital", "read_digital", "DigitalReading", "source_order",
+__all__ = ["DigitalDesign", "DESIGN", "embed_digital", "read_digital", "DigitalReading", "source_order", "carrier_pool",
            "encode_source", "decode_source", "layer_sizes"]
 
 INDEX_BITS = 8
@@ -69,6 +72,11 @@ def _carriers(count: int) -> print_carriers.PrintLayout:
     chips, base = print_carriers.carrier_chips(print_carriers.PILOTS + count, rng)
     return print_carriers.PrintLayout(0, 0, chips, base, np.zeros(0, int), np.zeros(0), np.zeros(0), 1.0,
                           rng.choice([-1.0, 1.0], size=print_carriers.PILOTS))
+
+
+def carrier_pool(count: int) -> print_carriers.PrintLayout:
+    """The pilots + `count` data carriers both digital candidates write (this one and `bench.digital_ldpc`)."""
+    return _carriers(count)
 
 
 def _sigmas(res: int, channels: int) -> np.ndarray:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 import socket
 import subprocess
 import sys
@@ -66,20 +67,31 @@ def _get(base: str, url: str) -> bytes:
         return r.read()
 
 
-def _start_server(cache: str, port: int):
-    proc = subprocess.Popen([sys.executable, "-m", "snapshot3d", "serve", "--port", str(port), "--cache", cache],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+def _start_server(cache: str, port: int, *options: str):
+    """A `snapshot3d serve` subprocess (extra `options` appended) -> (process, base URL, its log file).
+
+    Its stderr goes to a file beside the cache folder, never to a pipe: the server logs one line per refusal,
+    so a storm's 503s fill an unread pipe (64 kB) within seconds, and then the server's event loop blocks on
+    that write and answers nobody (the stall of issue 39)."""
+    log = Path(cache).with_name(Path(cache).name + ".log")
+    with log.open("wb") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "snapshot3d", "serve", "--port", str(port), "--cache", cache,
+                                 *options], stdout=subprocess.DEVNULL, stderr=err)
     base = f"http://127.0.0.1:{port}"
     for _ in range(600):
         try:
             _get(base, "/healthz")
-            return proc, base
+            return proc, base, log
         except OSError:
             if proc.poll() is not None:
-                raise RuntimeError(f"the server did not start: {proc.stderr.read()[-500:]}")
+                raise RuntimeError(f"the server did not start: {log.read_text(errors='replace')[-500:]}")
             time.sleep(0.1)
     proc.kill()
     raise RuntimeError("the server did not answer /healthz within 60 s")
+
+
+def _log_lines(log: Path) -> int:
+    return log.read_bytes().count(b"\n") if log.is_file() else 0
 
 
 def _peak_rss_mb(pid: int) -> float:
@@ -164,7 +176,7 @@ def bench_serve_command(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     inputs = [Path(asset("example-photo.jpg")), SNAPSHOT]
     cache = tempfile.mkdtemp(prefix="s3d-bench-serve-")
-    proc, base = _start_server(cache, _free_port())
+    proc, base, log = _start_server(cache, _free_port())
     try:
         reference = {}
         for path in inputs:  # one decode of each input alone: the scene every later answer must carry
@@ -204,10 +216,12 @@ def bench_serve_command(args) -> int:
         "latency_ms_p50": float(np.percentile([r["latency_ms"] for r in ok], 50)) if ok else None,
         "latency_ms_p95": float(np.percentile([r["latency_ms"] for r in ok], 95)) if ok else None,
         "attempt_ms_p50": float(np.percentile([r["attempt_ms"] for r in ok], 50)) if ok else None,
-        "peak_server_rss_mb": peak,
+        "peak_server_rss_mb": peak, "server_log_lines": _log_lines(log),  # one per refusal (each 503 included)
         "render_ms_median": float(np.median(render_ms)), "render_ms_p95": float(np.percentile(render_ms, 95)),
         "browser": browser,
     }
+    shutil.rmtree(cache, ignore_errors=True)   # the server's scene cache and its log: nothing left in /tmp
+    log.unlink(missing_ok=True)
     doc = write_report(out, "serve", rows, {
         "server": "snapshot3d serve, default limits (max_decodes 2)", "inputs": [p.name for p in inputs],
         "targets": {"render_ms_median": "<= 40", "client_fps_380": ">= 30, or the moving path at >= 30 with its "

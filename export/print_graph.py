@@ -22,7 +22,7 @@ __all__ = ["PrintRestoreGraph"]
 _BANDS = tuple(print_carriers.PRINT_BANDS)   # the pool's order: Y2LH, Y2HL, Y2HH, Y1LH, Y1HL, RG2LH, RG2HL
 
 
-def _haar(x: Tensor):
+def haar(x: Tensor):
     a, b, c, d = x[..., 0::2, 0::2], x[..., 0::2, 1::2], x[..., 1::2, 0::2], x[..., 1::2, 1::2]
     return (a + b + c + d) / 2, (a - b + c - d) / 2, (a + b - c - d) / 2, (a - b - c + d) / 2
 
@@ -31,9 +31,9 @@ def _pool(img: Tensor) -> Tensor:
     """img (3, H, W) RGB -> the flat pool of the codec's bands (`bands.analyse`, `print_carriers.flat`)."""
     y = img.sum(0) / math.sqrt(3.0)
     rg = (img[0] - img[1]) / math.sqrt(2.0)
-    yll, ylh1, yhl1, _ = _haar(y)
-    _, ylh2, yhl2, yhh2 = _haar(yll)
-    _, rlh2, rhl2, _ = _haar(_haar(rg)[0])
+    yll, ylh1, yhl1, _ = haar(y)
+    _, ylh2, yhl2, yhh2 = haar(yll)
+    _, rlh2, rhl2, _ = haar(haar(rg)[0])
     got = {"Y2LH": ylh2, "Y2HL": yhl2, "Y2HH": yhh2, "Y1LH": ylh1, "Y1HL": yhl1, "RG2LH": rlh2, "RG2HL": rhl2}
     return torch.cat([got[b].reshape(-1) for b in _BANDS])
 

@@ -21,19 +21,21 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.errors import UserError
 
-__all__ = ["PROFILE_VERSION", "PRESET_REFERENCE", "E2E_REFERENCE", "calibrate_image", "nearest_preset",
+__all__ = ["PROFILE_VERSION", "PRESET_REFERENCE", "E2E_REFERENCE", "calibrate_image", "nearest_preset", "photo_linear",
            "load_profile", "calibrate_command", "FEATURES"]
 
-PROFILE_VERSION = 1
-"""version of the channel profile's JSON layout (`load_profile` refuses any other)"""
+PROFILE_VERSION = 2
+"""version of the channel profile's JSON layout and measures (`load_profile` refuses any other; 2: MTF50 in
+linear light from the photo, `unit` from the median of the residual's periodogram)"""
 FEATURES = ("mtf50", "gain", "unit")
 """the measurements the nearest preset is chosen by (their logs)"""
 PRESET_REFERENCE = {
     # (mean, std) of log(mtf50), log(channel gain), log(channel unit) over simulated chart photos, seeds
-    # 100-111 per preset, sheet at 2 dots per snapshot pixel, chart calib-2 (`snapshot3d bench calibrate --reference`)
-    "mild": ((-0.859, 0.184), (-0.287, 0.082), (-6.7, 0.323)),
-    "moderate": ((-1.158, 0.181), (-0.758, 0.137), (-6.978, 0.254)),
-    "severe": ((-1.384, 0.211), (-1.304, 0.461), (-6.361, 0.424)),
+    # 100-111 per preset, sheet at 2 dots per snapshot pixel, chart calib-2, the measure of 2026-11-26 07:10 UTC
+    # (MTF in the photo's linear light, unit robust to moire; `snapshot3d bench calibrate --reference`)
+    "mild": ((-0.844, 0.218), (-0.287, 0.082), (-6.773, 0.235)),
+    "moderate": ((-1.071, 0.205), (-0.758, 0.138), (-6.919, 0.258)),
+    "severe": ((-1.371, 0.172), (-1.303, 0.46), (-6.378, 0.491)),
 }
 E2E_REFERENCE = {
     # median e2e_psnr (dB) through each preset of the print codec's scenes at planes 16x4 (3072 values):
@@ -61,6 +63,25 @@ def nearest_preset(measures: dict) -> tuple[str, dict]:
     return min(dist, key=dist.get), dist
 
 
+def photo_linear(img: np.ndarray, fit) -> np.ndarray:
+    """The photo's own linear light at the snapshot's pixels: (H, W, 3) uint8 **BGR** photo and its scan's
+    geometry (`ScanResult.fit`) -> (380, 380, 3) float32 linear **RGB**, rectified as `scan` rectifies (the
+    same resampling, then 2 x 2 area averaging in linear light), its codes decoded as sRGB, no colour or tone
+    correction: the domain the camera's blur acted in, where the MTF is measured (ISO 12233's OECF step; the
+    corrected snapshot is linear in the printer's input codes, which a printer's dot gain bends)."""
+    import cv2
+
+    from .colour import linear_lut
+    from .rectify import OVERSAMPLE, rectify_sheet
+
+    hi = cv2.LUT(rectify_sheet(img, fit), linear_lut())
+    k = OVERSAMPLE
+    lo = sum(hi[i::k, j::k] for i in range(k) for j in range(k)) / (k * k)
+    n = formats.SNAPSHOT_SIZE
+    sx0, sy0 = formats.SHEET_BOX[:2]
+    return np.ascontiguousarray(lo[-sy0:-sy0 + n, -sx0:-sx0 + n, ::-1], np.float32)
+
+
 def calibrate_image(img: np.ndarray) -> dict:
     """Calibrate from a photo of the chart, (H, W, 3) uint8 **BGR**. Returns the channel profile (a dict,
     JSON-ready). UserError when the photo holds no sheet, or a sheet that is not the chart."""
@@ -83,7 +104,7 @@ def calibrate_image(img: np.ndarray) -> dict:
     if res.qr is None and chart_match(res.snapshot) < _MATCH_MIN:
         raise UserError("the sheet in the photo is not the calibration chart (its QR code is unreadable and its "
                         "pattern does not match)")
-    m = measure_chart(res.snapshot)
+    m = measure_chart(res.snapshot, photo_linear(img, res.fit))
     name, dist = nearest_preset(m)
     t2 = time.perf_counter()
     return {"profile_version": PROFILE_VERSION, "kind": "snapshot3d channel profile", "nearest_preset": name,

@@ -87,22 +87,27 @@ def linearise(img: np.ndarray, tone_curve) -> np.ndarray:
     return srgb_to_linear(np.clip(lut[img], 0.0, 255.0)) @ np.array([0.2126, 0.7152, 0.0722])
 
 
-def measure_mtf(img: np.ndarray, tone_curve=None) -> dict:
-    """MTF50 (cycles per snapshot pixel) of the chart's slanted edges: the median over the near-vertical
-    edges (`mtf50_x`, resolution along x), the near-horizontal ones (`mtf50_y`), and of all (`mtf50`); and
-    the mean MTF curve sampled at 0.05 cycles per pixel steps. `tone_curve` (`measure_tone`): linearise
-    through it (else the codes are taken as sRGB)."""
-    lum = _luma(img) if tone_curve is None else linearise(img, tone_curve)
+def measure_mtf(img: np.ndarray, tone_curve=None, linear: np.ndarray | None = None) -> dict:
+    """MTF50 (cycles per snapshot pixel) of the chart's slanted edges: of the mean MTF over the near-vertical
+    edges (`mtf50_x`, resolution along x), over the near-horizontal ones (`mtf50_y`), and over all (`mtf50`);
+    and that mean curve sampled at 0.05 cycles per pixel steps. The edges are measured in `linear` when given,
+    (380, 380, 3) float linear RGB of the photo at the snapshot's pixels (`calibrate.photo_linear`: the light
+    the camera saw, where its blur acted); else in `img` linearised through `tone_curve` (`measure_tone`), or
+    taken as sRGB without one. The mean curve, not a median of the edges' MTF50s: one edge's MTF50 moves by
+    up to 0.1 with the halftone's texture in its window, the mean of eight curves far less."""
+    if linear is not None:
+        lum = np.asarray(linear, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    else:
+        lum = _luma(img) if tone_curve is None else linearise(img, tone_curve)
     by_dir = {True: [], False: []}
-    curves = []
     grid = np.arange(0.0, 0.75, 0.05)
     for x0, y0, x1, y1, vertical in chart.EDGE_ROIS:
         f, m = edge_mtf(lum[y0:y1, x0:x1], vertical)
-        by_dir[vertical].append(mtf50(f, m))
-        curves.append(np.interp(grid, f, m))
-    return {"mtf50": float(np.median(by_dir[True] + by_dir[False])), "mtf50_x": float(np.median(by_dir[True])),
-            "mtf50_y": float(np.median(by_dir[False])),
-            "mtf_curve": [[round(float(g), 3), round(float(v), 4)] for g, v in zip(grid, np.mean(curves, 0))]}
+        by_dir[vertical].append(m)
+    mean = np.mean(by_dir[True] + by_dir[False], 0)
+    return {"mtf50": mtf50(f, mean), "mtf50_x": mtf50(f, np.mean(by_dir[True], 0)),
+            "mtf50_y": mtf50(f, np.mean(by_dir[False], 0)),
+            "mtf_curve": [[round(float(g), 3), round(float(v), 4)] for g, v in zip(grid, np.interp(grid, f, mean))]}
 
 
 def _inner(box, margin: int = 6):
@@ -145,6 +150,16 @@ def measure_tone(img: np.ndarray, points: int = 17) -> dict:
             "tone_rmse": float(np.sqrt(np.mean((got - sent) ** 2)))}
 
 
+def _median_power(maps: list) -> float:
+    """Power per coefficient of residual maps (a band's (h, w) maps, one per carrier square), robust to a few
+    strong spatial frequencies: the median of their periodograms over every frequency, over ln 2 (a periodogram
+    value of white Gaussian noise is exponential, its median ln 2 times its mean). A halftone's moire puts its
+    power in a few narrow peaks whose place and height change with the pose; a mean over coefficients counts
+    them fully, this median does not."""
+    pw = np.concatenate([(np.abs(np.fft.fft2(m)) ** 2 / m.size).ravel() for m in maps])
+    return float(np.median(pw) / np.log(2.0))
+
+
 def measure_bands(img: np.ndarray) -> dict:
     """The print channel per print-codec band (`PRINT_BANDS`) over the carrier squares, in `print_channel`'s
     terms: every coefficient weighed as the codec's matched filters weigh it (`print_carriers.filters`: a
@@ -155,7 +170,8 @@ def measure_bands(img: np.ndarray) -> dict:
     the noise model (what `print_read.band_response` calls the noise). Over all bands: `print_channel`, the
     `print_channel.ChannelModel` fields (`gain`, `unit`: one reading over all bands' chips, as a carrier's),
     and `channel`, unweighted as before `print_channel` was added (`gain`: one least-squares ratio over all
-    bands' coefficients; `unit`: the raw power per coefficient left, [0, 1]^2 units)."""
+    bands' coefficients; `unit`: the power per coefficient left, [0, 1]^2 units, robust to the halftone's moire
+    (`_median_power`; `unit_mean`: the plain mean, what `unit` was before))."""
     from snapshot3d.codecs.print_carriers import band_noise
 
     ref = chart.chart_snapshot()
@@ -176,7 +192,7 @@ def measure_bands(img: np.ndarray) -> dict:
     total_g = sum(num.values()) / max(sum(den.values()), 1e-30)
     plain_g = sum(float(np.sum(c * r)) for ps in parts.values() for c, r, _ in ps) / max(
         sum(float(np.sum(r * r)) for ps in parts.values() for _, r, _ in ps), 1e-30)
-    res2 = cnt = rel = var = 0.0
+    res2 = cnt = rel = var = robust = 0.0
     for b, ps in parts.items():
         e = PRINT_BANDS[b]
         r2 = [(c - gain[b] * r) ** 2 for c, r, _ in ps]
@@ -190,7 +206,9 @@ def measure_bands(img: np.ndarray) -> dict:
         var += e * vb
         res2 += raw
         cnt += nb
-    return {"bands": out, "channel": {"gain": round(plain_g, 4), "unit": float(f"{res2 / cnt:.4g}")},
+        robust += nb * _median_power([c - plain_g * r for c, r, _ in ps])
+    return {"bands": out, "channel": {"gain": round(plain_g, 4), "unit": float(f"{robust / cnt:.4g}"),
+                                      "unit_mean": float(f"{res2 / cnt:.4g}")},
             "print_channel": {"gain": round(total_g, 4), "unit": float(f"{rel / var:.4g}")}}
 
 
@@ -208,15 +226,16 @@ def measure_misregistration(img: np.ndarray) -> dict:
     return {"shifts_px": shifts, "misregistration_px": float(max(np.hypot(*s) for s in shifts))}
 
 
-def measure_chart(img: np.ndarray) -> dict:
-    """All of the above on a rectified chart (380, 380, 3) uint8 sRGB RGB, one dict."""
+def measure_chart(img: np.ndarray, linear: np.ndarray | None = None) -> dict:
+    """All of the above on a rectified chart (380, 380, 3) uint8 sRGB RGB, one dict; `linear`: the photo's
+    linear light at the snapshot's pixels for the MTF (`measure_mtf`)."""
     n = chart.N
     if img.shape != (n, n, 3) or img.dtype != np.uint8:
         raise ValueError(f"expected ({n}, {n}, 3) uint8 RGB, got {img.shape} {img.dtype}")
     out = measure_tone(img)
     for f in (measure_noise, measure_bands, measure_misregistration):
         out.update(f(img))
-    out.update(measure_mtf(img, out["tone_curve"]))
+    out.update(measure_mtf(img, out["tone_curve"], linear))
     return out
 
 

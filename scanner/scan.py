@@ -74,12 +74,16 @@ def _sheet_markers(ids: np.ndarray, corners: np.ndarray) -> dict[int, np.ndarray
 
 
 def _find(img: np.ndarray, factor: int) -> tuple[dict, np.ndarray]:
-    """Sheet markers found on the photo shrunk by `factor`, corners in full-resolution pixels; and the grey copy."""
+    """Sheet markers found on the photo shrunk by `factor`, corners in full-resolution pixels; and the grey copy
+    ((H // factor, W // factor) uint8): the grey photo's factor x factor block means, the last H % factor rows
+    and W % factor columns left out (OpenCV's integer-factor area path on one channel: 4 ms for a 12 MP photo,
+    where shrinking the colour photo by W / (W // factor) took 21, issue 39)."""
     h, w = img.shape[:2]
-    small = cv2.resize(img, (w // factor, h // factor), interpolation=cv2.INTER_AREA) if factor > 1 else img
-    gray = cv2.cvtColor(small, cv2.COLOR_BGR2GRAY)
+    gray = cv2.cvtColor(img[:h - h % factor, :w - w % factor], cv2.COLOR_BGR2GRAY)
+    if factor > 1:
+        gray = cv2.resize(gray, (w // factor, h // factor), interpolation=cv2.INTER_AREA)
     ids, corners = detect_markers(gray, detector=_detector())
-    corners = (corners + 0.5) * np.array([w / (w // factor), h / (h // factor)], np.float32) - 0.5
+    corners = (corners + 0.5) * np.float32(factor) - 0.5
     return _sheet_markers(ids, corners), gray
 
 

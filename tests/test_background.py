@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 import torch
-from helpers import run_cli
+from helpers import assert_one_line_error, run_cli
 
 from snapshot3d.auto_box import frustum_margins, overlap_box
 from snapshot3d.capture import CaptureOptions, box_from_cameras
@@ -134,3 +134,126 @@ def test_an_unknown_background_is_refused_in_one_line():
         check_fit_config(FitConfig(background="black"))
     with pytest.raises(UserError, match="--background-samples >= 2"):
         check_fit_config(FitConfig(background="outer", background_samples=1))
+
+
+def test_the_distortion_loss_is_the_pairwise_sum_and_prefers_one_lump():
+    from snapshot3d.train.field.background import distortion_loss
+    g = torch.Generator().manual_seed(1)
+    w = torch.rand(5, 30, generator=g, dtype=torch.float64) / 30
+    t = torch.arange(30, dtype=torch.float64) * 0.07
+    pairs = (w[:, :, None] * w[:, None, :] * (t[:, None] - t[None, :]).abs()).sum((1, 2)) + 0.07 / 3 * (w ** 2).sum(1)
+    assert torch.allclose(distortion_loss(w, 0.07), pairs, rtol=1e-10)
+    lump, spread = torch.zeros(1, 30), torch.zeros(1, 30)
+    lump[0, 10:12], spread[0, ::6] = 0.45, 0.18   # the same opacity (0.9), on a surface or strewn along the ray
+    assert float(distortion_loss(spread, 0.07)) > 10 * float(distortion_loss(lump, 0.07))   # 0.548 vs 0.038
+
+
+def test_the_opacity_entropy_is_zero_at_the_ends_and_largest_halfway():
+    from snapshot3d.train.field.background import opacity_entropy
+    h = opacity_entropy(torch.tensor([0.0, 1.0, 0.5, 0.1]))
+    assert float(h[:2].max()) < 2e-3
+    assert float(h[2]) == pytest.approx(np.log(2), rel=1e-4) and 0.3 < float(h[3]) < float(h[2])
+
+
+def test_wall_points_lie_near_the_sides_and_top_never_the_floor():
+    from snapshot3d.train.field.background import wall_points
+    u = wall_points(5000, 0.2, torch.Generator().manual_seed(0))
+    assert float(u.abs().max()) <= 1.0
+    side = (u[:, :2].abs() >= 0.8).any(1)
+    top = u[:, 2] >= 0.8
+    assert bool((side | top).all())
+    assert float((u[:, 2] < -0.8).float().mean()) < 0.1   # only where a side band reaches down
+    assert 0.1 < float(top.float().mean()) < 0.35          # one face in five
+
+
+def test_floor_points_lie_in_the_floor_band_under_their_column():
+    from snapshot3d.train.field.background import floor_points
+    pts, above = floor_points(2000, 0.1, torch.Generator().manual_seed(0))
+    assert float(pts[:, 2].min()) >= -1 and float(pts[:, 2].max()) <= -0.9
+    assert float(pts[:, :2].abs().max()) <= 1 and float(pts[:, :2].std()) > 0.5   # the whole footprint
+    assert torch.equal(above[:, :, :2], pts[:, None, :2].expand(-1, 3, -1))
+    assert torch.allclose(above[0, :, 2], torch.tensor([-0.8, -0.7, -0.6]))
+
+
+def test_the_weights_path_renders_the_same_colour():
+    from snapshot3d.train.field.decoder import load_decoder
+    frame = BoxFrame.from_box(np.array([[-1, -1, -1], [1, 1, 1]], np.float32))
+    g = torch.Generator().manual_seed(3)
+    bg, dec = OuterField(8), load_decoder()
+    planes = torch.randn(3, 8, 16, 16, generator=g) * 0.5
+    o = torch.randn(64, 3, generator=g) * 0.3 + torch.tensor([0.0, 0.0, -4.0])
+    d = torch.nn.functional.normalize(torch.tensor([0.0, 0.0, 4.0]) - o + torch.randn(64, 3, generator=g) * 0.3, dim=1)
+    a = render_with_background(planes, dec, frame, None, bg, o, d, 8)
+    b = render_with_background(planes, dec, frame, None, bg, o, d, 8, extras=True)
+    assert torch.allclose(a[0], b[0], atol=1e-6) and torch.allclose(a[1], b[1], atol=1e-6) and a[2] == b[2]
+    assert b[3]["weights"].shape[0] == 64 and torch.allclose(b[3]["weights"].sum(1), b[1], atol=1e-5)
+    empty = torch.full((3, 8, 4, 4), -1.0)   # no density in the box: the colour is the background's alone
+    c = render_with_background(empty, dec, frame, None, bg, o, d, 8, extras=True)
+    assert float(c[1].max()) < 1e-4 and torch.allclose(c[0], c[3]["background_alone"], atol=1e-4)
+
+
+def test_negative_regulariser_weights_are_refused_in_one_line():
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.field.config import FitConfig, check_fit_config
+    with pytest.raises(UserError, match="--distortion-weight, --opacity-weight, --wall-weight and --floor-weight must be >= 0"):
+        check_fit_config(FitConfig(background="outer", distortion_weight=-1.0))
+
+
+def test_bench_fit_captures_is_parsed_and_an_unknown_mode_refused(tmp_path):
+    proc = run_cli("bench", "fit", "--help")
+    assert proc.returncode == 0 and "--captures" in proc.stdout
+    proc = run_cli("bench", "capture-background", "--modes", "outer,bogus", "--out", str(tmp_path))
+    assert_one_line_error(proc, "unknown fit 'bogus'")
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_sides_and_top_are_cut_round_the_dense_cells_with_a_margin():
+    g = 32
+    rng = np.random.default_rng(0)
+    alpha = rng.uniform(0, 0.3, (g, g, g))       # diffuse floaters everywhere
+    alpha[:, :, :9] = 0.6                        # the floor
+    alpha[12:20, 10:22, 9:20] = 0.95             # the object on it
+    alpha[0, 0, 30] = 0.9                        # one dense speck in a corner does not hold the box open
+    box = np.array([[-1, -1, -1], [1, 1, 1]], np.float64)
+    out, ground = box_from_density(alpha, box, looks_down=True, sides=True)
+    cell = 2 / g
+    obj = np.array([[-1 + 12 * cell, -1 + 10 * cell, ground], [-1 + 20 * cell, -1 + 22 * cell, -1 + 20 * cell]])
+    assert np.all(out[0] <= obj[0] + 1e-6) and np.all(out[1] >= obj[1] - 1e-6)   # the object is kept whole
+    assert out[0, 2] == pytest.approx(ground)
+    assert np.prod(out[1] - out[0]) < 0.4 * np.prod(box[1] - box[0]) * (1 - (ground + 1) / 2)
+    assert np.allclose(box_from_density(alpha, box, True, sides=False)[0][[0, 1], :2], box[:, :2])
+
+
+def test_the_background_regularisers_leave_a_fit_on_white_unchanged():
+    """The regularisers act with --background outer alone: the default fit's steps are the same with them set."""
+    from dataclasses import replace
+
+    from snapshot3d.train.field.config import FitConfig
+    from snapshot3d.train.field.decoder import load_decoder
+    from snapshot3d.train.field.fit import fit
+    posed = load_scene("builtin:spot", size=24)
+    cfg = FitConfig(steps=3, batch_rays=128, plane_res=8, plane_channels=4)
+    a = fit(posed, load_decoder(), cfg).state.planes.planes.detach()
+    b = fit(posed, load_decoder(), replace(cfg, distortion_weight=1.0, opacity_weight=1.0, wall_weight=1.0,
+                                           floor_weight=1.0)).state.planes.planes.detach()
+    assert torch.equal(a, b)
+
+
+def test_each_regulariser_adds_a_finite_term_with_a_gradient_into_the_planes():
+    from snapshot3d.train.field.background import render_and_regularise
+    from snapshot3d.train.field.config import FitConfig
+    from snapshot3d.train.field.decoder import load_decoder
+    frame = BoxFrame.from_box(np.array([[-1, -1, -1], [1, 1, 1]], np.float32))
+    g = torch.Generator().manual_seed(4)
+    planes = (torch.randn(3, 8, 16, 16, generator=g) * 0.5).requires_grad_()
+    o = torch.randn(64, 3, generator=g) * 0.3 + torch.tensor([0.0, 0.0, -4.0])
+    d = torch.nn.functional.normalize(torch.tensor([0.0, 0.0, 4.0]) - o, dim=1)
+    target = torch.rand(64, 3, generator=g)
+    base = FitConfig(background="outer", background_samples=8, batch_rays=64)
+    assert render_and_regularise(planes, load_decoder(), frame, None, OuterField(8), base, o, d, target, g)[2] is None
+    for field in ("distortion_weight", "opacity_weight", "wall_weight", "floor_weight"):
+        cfg = FitConfig(**{**base.__dict__, field: 1.0})
+        _, _, term = render_and_regularise(planes, load_decoder(), frame, None, OuterField(8), cfg, o, d, target, g)
+        grad, = torch.autograd.grad(term, planes)
+        assert float(term.detach()) > 0 and np.isfinite(float(term.detach())), field
+        assert float(grad.abs().sum()) > 0, field

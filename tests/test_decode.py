@@ -39,9 +39,28 @@ def test_decode_example_photo_without_torch(tmp_path):
     assert rep["codec"] == formats.PRINT_CODEC and q["basis"] == "the codec's pilot carriers and this scene's views"
     assert 0.05 < q["plane_rmse_expected"] < 0.5  # a moderate photo of a print: the pilots measure its noise
     assert 15 < q["restore_psnr_expected_db"] < 40 and q["calibration"]["held_out_rmse_db"] > 0
+    assert rep["channel"]["nearest_preset"] and rep["channel"]["gain"] > 0  # filled in after the views
+    assert 0 < rep["timings_ms"]["first_view"] <= rep["decode_ms"]
     mesh = trimesh.load(out / "mesh.glb", force="mesh")
     assert len(mesh.vertices) > 100
     assert not any(p.name.endswith(".partial") for p in tmp_path.iterdir())
+
+
+def test_first_view_comes_before_the_channel_report(monkeypatch):
+    """Nothing the views do not need runs before the first view (issue 39): the channel block is measured
+    after the views, and still lands in the report as `decode_scene` makes it."""
+    from snapshot3d.viewer import decode
+    events, real = [], decode.channel_report
+
+    def channel(*args, **kw):
+        events.append("channel")
+        return real(*args, **kw)
+    monkeypatch.setattr(decode, "channel_report", channel)
+    dec = decode.decode_photo(PHOTO, views=2, size=48, on_view=lambda i: events.append(f"view {i}"))
+    assert events[0] == "view 0" and events.count("channel") == 1 and events.index("channel") > events.index("view 1")
+    want = decode.decode_scene(PHOTO, estimate=False).report["channel"]
+    assert {k: v for k, v in dec.report["channel"].items() if k != "ms"} == {k: v for k, v in want.items() if k != "ms"}
+    assert dec.report["channel"]["nearest_preset"] is not None
 
 
 def test_decode_refuses_photo_without_sheet(tmp_path):

@@ -48,9 +48,11 @@ def test_simulate_profile_cli(moderate, tmp_path):
 @pytest.mark.slow
 def test_round_trip_median_of_three_photos():
     """calibrate(moderate photo, seeds 0-5) -> profile -> the solved preset, 3 photos of other seeds ->
-    calibrate: their median MTF50 within 15 % and channel gain within 25 % of the profile in at least 5 of 6
-    (measured: 6/6 and 5/6); the noise per coefficient within 25 % in at least 3 of 6 (measured 3/6: one photo
-    of a fixed condition reads it with a log spread of 0.46, the halftone's moire; docs/calibration.md)."""
+    calibrate: their median MTF50 within 15 % and channel gain within 25 % of the profile in 6 of 6, the noise
+    per coefficient within 25 % in 4 of 6: the counts measured (2026-11-26; the measure of 07:10 UTC), no
+    margin. The two noise misses (+47 %, +84 %): profiles whose noise lies below what the preset reaches at
+    its own sensor noise (the halftone's and paper's texture), and photos whose glare raises it (the light is
+    drawn per photo); docs/calibration.md."""
     from snapshot3d.bench.calibrate import chart_capture
 
     logs = lambda p: np.log([p["mtf50"], p["channel"]["gain"], p["channel"]["unit"]])   # noqa: E731
@@ -61,7 +63,7 @@ def test_round_trip_median_of_three_photos():
         second = [logs(calibrate_image(chart_capture(preset, seed + 20 + 7 * j)[0])) for j in range(3)]
         err = np.abs(np.median(second, 0) - logs(first))
         within += err < np.log([1.15, 1.25, 1.25])
-    assert within[0] >= 5 and within[1] >= 5 and within[2] >= 3, within
+    assert within[0] >= 6 and within[1] >= 6 and within[2] >= 4, within
 
 
 def test_moderate_profile_gives_the_moderate_channel(moderate):

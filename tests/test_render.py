@@ -116,3 +116,56 @@ def test_bake_refines_only_near_the_surface():
         bake_field(field_models(decoder=scene.decoder_version), pad_planes(scene.planes()), Frame.from_box(scene.box), 60)
     with pytest.raises(ValueError, match="from 8 to 176"):
         bake_field(field_models(decoder=scene.decoder_version), pad_planes(scene.planes()), Frame.from_box(scene.box), 184)
+
+
+def _bake_by_cells(models, planes12: np.ndarray, frame: Frame, res: int):
+    """The bake written the plain way (the coarse grid repeated, the shell's fine cells scattered in one by one,
+    then padded and laid out as tiles): what `bake_field`'s direct writes must reproduce exactly."""
+    from snapshot3d.viewer.bake import COARSE, DENSE_ALPHA, grid_field
+    nc = res // COARSE
+    logit_c, rgb_c = grid_field(models, planes12, nc, np.argwhere(np.ones((nc, nc, nc), bool)))
+    alpha = -np.expm1(-np.exp(logit_c) * frame.step).reshape(nc, nc, nc)
+    shell = dilate3(alpha > formats.OCC_ALPHA_THRESHOLD) & ~erode3(alpha > DENSE_ALPHA)
+    up = lambda a: a.repeat(COARSE, 0).repeat(COARSE, 1).repeat(COARSE, 2)  # noqa: E731
+    grid = up(np.concatenate([logit_c[:, None], rgb_c], 1).reshape(nc, nc, nc, 4))
+    fine = np.argwhere(up(shell))
+    logit_f, rgb_f = grid_field(models, planes12, res, fine)
+    grid[tuple(fine.T)] = np.concatenate([logit_f[:, None], rgb_f], 1)
+    h = res // 2
+    sigma = np.exp(grid[..., 0]).reshape(h, 2, h, 2, h, 2).mean((1, 3, 5), dtype=np.float32)
+    b = res + 2
+    atlas = np.pad(grid, ((1, 1),) * 3 + ((0, 0),), mode="edge").transpose(1, 2, 0, 3).reshape(b, b * b, 4)
+    return grid, sigma, atlas, nc ** 3 + len(fine)
+
+
+@pytest.mark.parametrize("res", [32, 64])
+def test_bake_writes_the_same_grid_as_cell_by_cell(res):
+    """bake_field fills the atlas block by block, the grid a view of it (issue 39): every number as the plain
+    construction's, and the atlas still the padded grid `Baked` makes from a grid of its own."""
+    scene = load_scene_file(SPOT)
+    models, frame = field_models(decoder=scene.decoder_version), Frame.from_box(scene.box)
+    baked = bake_field(models, pad_planes(scene.planes()), frame, res)
+    grid, sigma, atlas, evaluated = _bake_by_cells(models, pad_planes(scene.planes()), frame, res)
+    assert baked.grid.shape == grid.shape and np.array_equal(baked.grid, grid)
+    assert np.array_equal(baked.sigma, sigma) and np.array_equal(baked.atlas, atlas) and baked.evaluated == evaluated
+    assert np.shares_memory(baked.grid, baked.atlas)  # one copy of the grid, not two
+    assert np.array_equal(Baked(np.ascontiguousarray(baked.grid), baked.sigma, 0).atlas, baked.atlas)
+
+
+def test_view_rays_in_blas_sized_parts_match_one_product():
+    """view_rays multiplies in parts below OpenBLAS's threading threshold: the same directions as one product."""
+    from snapshot3d.viewer.march import _BLAS_ROWS, _camera_dirs, view_rays
+    scene = load_scene_file(SPOT)
+    c2w, intr = orbit_cameras(scene.orbit, 3, 380)
+    assert 380 * 380 > 2 * _BLAS_ROWS
+    for k in range(3):
+        _, d = view_rays(c2w[k], intr[k], 380, 380, Frame.from_box(scene.box))
+        whole = _camera_dirs(*[float(x) for x in intr[k]], 380, 380) @ np.asarray(c2w[k])[:3, :3].T.astype(np.float32)
+        assert d.dtype == np.float32 and np.array_equal(d, whole)
+
+
+def test_sessions_do_not_spin():
+    """onnxruntime's threads sleep between runs (a spinning one takes a shared core from numpy and OpenCV)."""
+    from snapshot3d.viewer.runtime import model_path, session
+    opts = session(str(model_path("field"))).get_session_options()
+    assert opts.get_session_config_entry("session.intra_op.allow_spinning") == "0"

@@ -272,3 +272,21 @@ def test_simulate_reads_the_pdf_through_the_png_beside_it(tmp_path):
     assert_one_line_error(proc, "sheet.png not found next to sheet.pdf")
     proc = run_cli("simulate", str(tmp_path / "nothing.png"), "-o", str(tmp_path / "c.jpg"))
     assert_one_line_error(proc, "sheet not found")
+
+
+def test_detection_copy_is_the_grey_photo_in_blocks(sheet):
+    """Markers are found on the grey photo's factor x factor block means (OpenCV's integer-factor path, issue 39;
+    the rows and columns past a multiple of the factor left out), and their corners map back to full
+    resolution where a full-resolution search puts them."""
+    from snapshot3d.scanner.scan import _find
+    img, _ = _photo(sheet, "none", 0)
+    h, w = img.shape[:2]
+    f = 3
+    assert w % f or h % f  # the crop is exercised
+    found, gray = _find(img, f)
+    assert gray.shape == (h // f, w // f) and gray.dtype == np.uint8
+    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[:h // f * f, :w // f * f].astype(np.float64)
+    assert np.abs(gray - grey.reshape(h // f, f, w // f, f).mean((1, 3))).max() <= 1.0
+    full, _ = _find(img, 1)
+    assert sorted(found) == sorted(full) and len(found) == 4
+    assert max(np.abs(found[i] - full[i]).max() for i in found) < 1.5  # photo pixels, before refinement

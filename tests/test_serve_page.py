@@ -4,7 +4,6 @@ the same pose; a photo that cannot be decoded shows why; without WebGL2 the page
 import base64
 import shutil
 import socket
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -27,7 +26,7 @@ HTMLCanvasElement.prototype.getContext = function (kind, ...rest) { return kind 
 
 
 @pytest.fixture(scope="module")
-def base_url():
+def base_url(tmp_path_factory):
     import uvicorn
 
     from snapshot3d.viewer.serve_config import ServeConfig
@@ -37,7 +36,7 @@ def base_url():
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()
-    server = uvicorn.Server(uvicorn.Config(create_app(ServeConfig(cache=tempfile.mkdtemp(prefix="s3d-serve-"))),
+    server = uvicorn.Server(uvicorn.Config(create_app(ServeConfig(cache=str(tmp_path_factory.mktemp("serve-cache")))),
                                            host="127.0.0.1", port=port, log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()

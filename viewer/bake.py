@@ -35,13 +35,15 @@ MAX_RES = 176       # the largest multiple of 8 with (B + 2)^2 atlas columns bel
 
 @dataclass(frozen=True)
 class Baked:
-    grid: np.ndarray    # (B, B, B, 4) float32 [ix, iy, iz]: density logit, r, g, b
+    grid: np.ndarray    # (B, B, B, 4) float32 [ix, iy, iz]: density logit, r, g, b (`bake_field`'s: a view of atlas)
     sigma: np.ndarray   # (B/2, B/2, B/2) float32 density at the cell centres of the level below, for the probe
     evaluated: int      # network evaluations the bake took (coarse + fine)
-    atlas: np.ndarray = field(init=False)  # (B + 2, (B + 2)^2, 4) float32, the padded grid (module doc)
+    atlas: np.ndarray | None = field(default=None, repr=False)
+    """(B + 2, (B + 2)^2, 4) float32, the padded grid (module doc); made from grid when not given"""
 
     def __post_init__(self):  # once per bake, not per read
-        object.__setattr__(self, "atlas", _atlas(self.grid))
+        if self.atlas is None:
+            object.__setattr__(self, "atlas", _atlas(self.grid))
 
     @property
     def res(self) -> int:
@@ -110,6 +112,39 @@ def _upsample(a: np.ndarray, f: int) -> np.ndarray:
     return b.reshape(n * f, n * f, n * f, *a.shape[3:])
 
 
+def _block_cells(blocks: np.ndarray, f: int) -> np.ndarray:
+    """coarse cells (K, 3) [bx, by, bz] -> their (K f^3, 3) fine cells [ix, iy, iz], block by block and in each
+    block y slowest, then z, then x (the atlas' order, `_blocks_view`)."""
+    oy, oz, ox = np.unravel_index(np.arange(f ** 3), (f, f, f))
+    return (blocks[:, None, :] * f + np.stack([ox, oy, oz], 1)[None]).reshape(-1, 3)
+
+
+def _blocks_view(a: np.ndarray, f: int) -> np.ndarray:
+    """a (n f, n f, n f, ...) [i, j, k] -> a view (n, f, n, f, n, f, ...) [bi, oi, bj, oj, bk, ok] (never a copy)."""
+    n = a.shape[0] // f
+    return a.reshape(n, f, n, f, n, f, *a.shape[3:], copy=False)
+
+
+def _fine_atlas(coarse: np.ndarray, blocks: np.ndarray, fine: np.ndarray, f: int) -> np.ndarray:
+    """The atlas (module doc) of the grid that is `coarse` (n, n, n, K) [bx, by, bz] repeated f times per axis,
+    but for the coarse cells `blocks` (M, 3), whose f^3 fine cells hold `fine` (M, f, f, f, K) [oy, oz, ox],
+    written straight into the atlas: no grid, transpose or padding copy in between."""
+    n, k = coarse.shape[0], coarse.shape[3]
+    b = n * f + 2
+    padded = np.empty((b, b, b, k), np.float32)  # [iy + 1, iz + 1, ix + 1]
+    inner = _blocks_view(padded[1:-1, 1:-1, 1:-1], f)  # [by, oy, bz, oz, bx, ox]
+    inner[...] = coarse.transpose(1, 2, 0, 3)[:, None, :, None, :, None]
+    inner[blocks[:, 1], :, blocks[:, 2], :, blocks[:, 0]] = fine
+    for axis in range(3):  # edge padding, axis by axis over the whole extent of the others (as np.pad's "edge")
+        edge = [slice(None)] * 3
+        for dst, src in ((0, 1), (b - 1, b - 2)):
+            edge[axis] = dst
+            pad = tuple(edge)
+            edge[axis] = src
+            padded[pad] = padded[tuple(edge)]
+    return padded.reshape(b, b * b, k)
+
+
 def bake_field(models, planes12: np.ndarray, frame: Frame, res: int) -> Baked:
     """Bake the field of planes12 (3, C_MAX, R, R) at res^3 (res a multiple of 2 * COARSE) with the
     renderer's graphs (`runtime.FieldModels`)."""
@@ -119,13 +154,24 @@ def bake_field(models, planes12: np.ndarray, frame: Frame, res: int) -> Baked:
     logit_c, rgb_c = grid_field(models, planes12, nc, np.argwhere(np.ones((nc, nc, nc), bool)))
     alpha = -np.expm1(-np.exp(logit_c) * frame.step).reshape(nc, nc, nc)
     shell = dilate3(alpha > formats.OCC_ALPHA_THRESHOLD) & ~erode3(alpha > DENSE_ALPHA)
-    grid = _upsample(np.concatenate([logit_c[:, None], rgb_c], 1).reshape(nc, nc, nc, 4), COARSE)
-    fine = np.argwhere(_upsample(shell, COARSE))
-    logit_f, rgb_f = grid_field(models, planes12, res, fine)
-    grid[fine[:, 0], fine[:, 1], fine[:, 2]] = np.concatenate([logit_f[:, None], rgb_f], 1)
-    h = res // 2
-    sigma = np.exp(grid[..., 0]).reshape(h, 2, h, 2, h, 2).mean((1, 3, 5), dtype=np.float32)
-    return Baked(grid, sigma, int(nc ** 3 + len(fine)))
+    blocks = np.argwhere(shell)
+    logit_f, rgb_f = grid_field(models, planes12, res, _block_cells(blocks, COARSE))
+    f = (len(blocks), COARSE, COARSE, COARSE)  # [block, oy, oz, ox]
+    atlas = _fine_atlas(np.concatenate([logit_c[:, None], rgb_c], 1).reshape(nc, nc, nc, 4), blocks,
+                        np.concatenate([logit_f[:, None], rgb_f], 1).reshape(*f, 4), COARSE)
+    sigma = _sigma(logit_c.reshape(nc, nc, nc), blocks, logit_f.reshape(f))
+    grid = atlas.reshape(res + 2, res + 2, res + 2, 4)[1:-1, 1:-1, 1:-1].transpose(2, 0, 1, 3)
+    return Baked(grid, sigma, int(nc ** 3 + len(logit_f)), atlas)
+
+
+def _sigma(coarse: np.ndarray, blocks: np.ndarray, fine: np.ndarray) -> np.ndarray:
+    """`Baked.sigma` of the grid whose density logit is `coarse` (n, n, n) repeated COARSE times per axis but
+    for the coarse cells `blocks` (M, 3), which hold `fine` (M, COARSE, COARSE, COARSE) [oy, oz, ox]: the mean
+    density over each 2^3 cells, from the logits laid out [ix, iy, iz] in C order (as it was always summed)."""
+    logit = _upsample(coarse, COARSE)
+    _blocks_view(logit, COARSE)[blocks[:, 0], :, blocks[:, 1], :, blocks[:, 2]] = fine.transpose(0, 3, 1, 2)
+    h = logit.shape[0] // 2
+    return np.exp(logit).reshape(h, 2, h, 2, h, 2).mean((1, 3, 5), dtype=np.float32)
 
 
 def sample_baked(baked: Baked, gx: np.ndarray, gy: np.ndarray, gz: np.ndarray):

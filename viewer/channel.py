@@ -26,8 +26,8 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.codecs import bands
 from snapshot3d.codecs.media import CODEC_MEDIUM
-from snapshot3d.codecs.print_carriers import PILOTS, PRINT_BANDS, PRINT_NOISE, _srgb_slope, flat, print_layout
-from snapshot3d.codecs.print_read import _band_fit, _per_band
+from snapshot3d.codecs.print_carriers import PILOTS, PRINT_BANDS, PRINT_NOISE, flat, print_layout, srgb_slope
+from snapshot3d.codecs.print_read import band_fit, per_band
 
 __all__ = ["CHANNEL_REFERENCE", "FEATURES", "BLUR_FIT", "STEADY_PX", "pilot_channel", "nearest_preset", "blur_px",
            "advice", "channel_report", "px_per_pixel"]
@@ -55,9 +55,9 @@ def _print_bands(cap: np.ndarray) -> tuple[dict, np.ndarray]:
     an image (380, 380, 3) float32 RGB in [0, 1], in float32 and nothing else (an eighth of its time); and
     the image's grey (mean of R, G, B: (380, 380) float32)."""
     y, rg = np.moveaxis(cap @ bands.OPPONENT[:2].T.astype(np.float32), 2, 0)
-    ll1, (lh1, hl1, _) = bands._haar(y)
-    _, (lh2, hl2, hh2) = bands._haar(ll1)
-    _, (rlh2, rhl2, _) = bands._haar(bands._haar(rg)[0])
+    ll1, (lh1, hl1, _) = bands.haar(y)
+    _, (lh2, hl2, hh2) = bands.haar(ll1)
+    _, (rlh2, rhl2, _) = bands.haar(bands.haar(rg)[0])
     return ({"Y2LH": lh2, "Y2HL": hl2, "Y2HH": hh2, "Y1LH": lh1, "Y1HL": hl1, "RG2LH": rlh2, "RG2HL": rhl2},
             y * np.float32(1 / math.sqrt(3.0)))
 
@@ -68,7 +68,7 @@ def _noise_pool(grey: np.ndarray) -> np.ndarray:
     n = formats.SNAPSHOT_SIZE
     blur = cv2.GaussianBlur(grey, (0, 0), 2.0)
     small = {lvl: cv2.resize(blur, (n // 2 ** lvl,) * 2, interpolation=cv2.INTER_AREA) for lvl in (1, 2)}
-    maps = {lvl: PRINT_NOISE * np.minimum(_srgb_slope(m.astype(np.float64)) ** 2, 100.0) for lvl, m in small.items()}
+    maps = {lvl: PRINT_NOISE * np.minimum(srgb_slope(m.astype(np.float64)) ** 2, 100.0) for lvl, m in small.items()}
     return np.concatenate([maps[int(b[-3])].ravel() for b in PRINT_BANDS])
 
 
@@ -94,7 +94,7 @@ def pilot_channel(snapshot: np.ndarray, res: int, channels: int, codec: str) -> 
     chips = flat(coeffs, PRINT_BANDS)[lay.chips[p]].astype(np.float64)
     band, nb = _pilot_bands(res, channels, codec), len(PRINT_BANDS)
     value = lay.pilot_amp * lay.pilot_signs
-    g_band, _ = _band_fit(_per_band(band, q * chips, nb), _per_band(band, q * w, nb) * value[:, None])
+    g_band, _ = band_fit(per_band(band, q * chips, nb), per_band(band, q * w, nb) * value[:, None])
     read = np.einsum("nk,nk->n", chips, q) * lay.pilot_signs
     factor = np.einsum("nk,nk->n", q * q, noise)
     gain = max(float(np.mean(read)) / lay.pilot_amp, 1e-3)

@@ -54,11 +54,21 @@ def _camera_dirs(fx: float, fy: float, cx: float, cy: float, width: int, height:
     return pixel_rays(np.eye(4), fx, fy, cx, cy, width, height)[1]
 
 
+_BLAS_ROWS = 16384
+"""rows per product of ray directions and a rotation: 16384 x 3 x 3 is below OpenBLAS's threading threshold
+(4 x 65536), so each part runs on the calling thread, with the same numbers as one product. One threaded
+product of a whole 380x380 view takes 0.2 ms on an idle machine but waited up to 110-170 ms for its second
+thread on the shared 2 cores (issue 39)"""
+
+
 def view_rays(c2w: np.ndarray, intr: np.ndarray, width: int, height: int, frame: Frame):
     """q-space rays of one OpenGL camera: its centre (1, 3) (every ray's origin) and unit directions
     (H*W, 3) float32, row-major."""
     c2w = np.asarray(c2w, np.float64)
-    d = _camera_dirs(*[float(x) for x in intr], width, height) @ c2w[:3, :3].T.astype(np.float32)
+    dirs, rot = _camera_dirs(*[float(x) for x in intr], width, height), c2w[:3, :3].T.astype(np.float32)
+    d = np.empty_like(dirs)
+    for i in range(0, len(dirs), _BLAS_ROWS):
+        np.matmul(dirs[i:i + _BLAS_ROWS], rot, out=d[i:i + _BLAS_ROWS])
     return ((c2w[:3, 3] - frame.centre) / frame.scale).astype(np.float32).reshape(1, 3), d
 
 

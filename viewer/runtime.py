@@ -1,7 +1,9 @@
 """onnxruntime sessions for the shipped models (numpy and onnxruntime only; never torch).
 
 Session options are tuned for a phone-class CPU: all graph optimisations, one intra-op thread per
-core, sequential execution, memory-pattern reuse (the shapes repeat chunk after chunk)."""
+core, sequential execution, memory-pattern reuse (the shapes repeat chunk after chunk), and threads that
+sleep between runs instead of spinning: a spinning thread takes a core from the numpy and OpenCV work
+between runs and from the renderer's threads (on 2 shared cores the bake ran slower with it, issue 39)."""
 from __future__ import annotations
 
 import os
@@ -49,6 +51,7 @@ def session(path: str, threads: int | None = None):
     so.inter_op_num_threads = 1
     so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     so.enable_mem_pattern = True
+    so.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
 
 

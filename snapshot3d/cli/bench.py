@@ -64,9 +64,11 @@ def add_commands(sub) -> None:
     b = add(sub, "bench", "benchmarks: write CSV, JSON and PNG charts under bench/results/", None)
     bsub = b.add_subparsers(dest="what", required=True, metavar="WHAT")
     bf = add(bsub, "fit", "field_psnr against scene_kb and fit time, spot and lego; training throughput",
-             _run("snapshot3d.bench.fit", "bench_fit_command"))
+             _run("snapshot3d.bench.capture_background", "bench_fit_command"))   # bench/fit.py's unless --captures
     _out(bf)
     _quick(bf)
+    bf.add_argument("--captures", action="store_true", help="instead: issue 40's measures, bench capture-background "
+                    "on spot and duck composites (no masks on white, with --background outer, masked)")
     bf.add_argument("--scenes", default="spot,lego", help="comma-separated bench scenes; a subset writes fit_<names>.*")
     bf.add_argument("--merge", action="store_true", help="only combine fit_<scene>.json files into fit.*")
 
@@ -147,6 +149,8 @@ def add_commands(sub) -> None:
              _run("snapshot3d.bench.print_digital", "bench_print_digital_command"))
     _out(bg)
     _print_sweep(bg, "comma-separated scene files (the print ladder's choices)", "none,jpeg75,mild,moderate,severe")
+    bg.add_argument("--codes", default="conv,ldpc", help="comma-separated digital candidates: conv (convolutional "
+                    "code, bit-planes), ldpc (IRA-LDPC layers, entropy-coded transform coder; needs the ldpc package)")
     _quick(bg, scenes="bench/models/spot-print.s3d", hosts="chelsea", heldout=0, seeds=1, severities="none,moderate")
 
     bb = add(bsub, "print-bands", "which bands a print and a phone keep per unit of host fidelity, and the print "

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["OPPONENT", "COLOURS", "DETAIL_BANDS", "ALL_BANDS", "analyse", "synthesise", "band_shape"]
+__all__ = ["OPPONENT", "COLOURS", "DETAIL_BANDS", "ALL_BANDS", "analyse", "synthesise", "band_shape", "haar"]
 
 # orthonormal RGB -> (luma, red-green, yellow-blue)
 OPPONENT = np.array([[1, 1, 1], [1, -1, 0], [1, 1, -2]], np.float64) / np.sqrt([[3.0], [2.0], [6.0]])
@@ -25,7 +25,7 @@ DETAIL_BANDS = tuple(f"{c}{lvl}{o}" for c in COLOURS for lvl in (1, 2, 3) for o 
 ALL_BANDS = DETAIL_BANDS + tuple(f"{c}{b}" for c in COLOURS for b in ("LL3", "LL2e"))
 
 
-def _haar(x: np.ndarray):
+def haar(x: np.ndarray):
     a, b, c, d = x[..., 0::2, 0::2], x[..., 0::2, 1::2], x[..., 1::2, 0::2], x[..., 1::2, 1::2]
     return (a + b + c + d) / 2, ((a - b + c - d) / 2, (a + b - c - d) / 2, (a - b - c + d) / 2)
 
@@ -54,10 +54,10 @@ def analyse(img: np.ndarray) -> dict[str, np.ndarray]:
     if h % 4 or w % 4:
         raise ValueError(f"image sides must be multiples of 4, got {img.shape}")
     opp = (np.asarray(img, np.float64) @ OPPONENT.T).transpose(2, 0, 1)   # (3, H, W)
-    ll1, d1 = _haar(opp)
-    ll2, d2 = _haar(ll1)
+    ll1, d1 = haar(opp)
+    ll2, d2 = haar(ll1)
     e = ll2.shape[-1] // 2 * 2
-    ll3, d3 = _haar(ll2[..., :e, :e])
+    ll3, d3 = haar(ll2[..., :e, :e])
     edge = np.concatenate([ll2[..., e:, :].reshape(3, -1), ll2[..., :e, e:].reshape(3, -1)], axis=1)
     out = {}
     for k, c in enumerate(COLOURS):

@@ -29,7 +29,7 @@ from .media import PRINT
 from .print_source import DESIGN_NOISE, PAYLOAD_RMS, allocate, check_print_planes, prior_spectrum
 
 __all__ = ["PrintLayout", "print_layout", "make_layout", "carrier_chips", "band_noise", "noise_map", "filters",
-           "flat", "unflat", "PRINT_BANDS", "PILOTS", "PRINT_NOISE"]
+           "flat", "unflat", "srgb_slope", "PRINT_BANDS", "PILOTS", "PRINT_NOISE"]
 
 # detail bands that carry the payload, with their relative energy per coefficient: the luma band of
 # 4-pixel cells, the finest luma band (horizontal and vertical) and the red-green band of 4-pixel cells.
@@ -93,7 +93,7 @@ def unflat(vec: np.ndarray, coeffs: dict, pool: dict[str, float]) -> dict:
     return out
 
 
-def _srgb_slope(s: np.ndarray) -> np.ndarray:
+def srgb_slope(s: np.ndarray) -> np.ndarray:
     """d(sRGB)/d(linear) at sRGB value s in [0, 1]: how much a print's linear-light noise (halftone,
     sensor) grows in sRGB, the space the snapshot is carried in (large in the darks)."""
     s = np.clip(s, 0.0, 1.0)
@@ -102,7 +102,7 @@ def _srgb_slope(s: np.ndarray) -> np.ndarray:
 
 
 PRINT_NOISE = 3e-4
-"""the print's own noise power per coefficient (halftone, paper, sensor) per unit of `_srgb_slope` squared"""
+"""the print's own noise power per coefficient (halftone, paper, sensor) per unit of `srgb_slope` squared"""
 
 
 def band_noise(image: np.ndarray, pool: dict[str, float] = PRINT_BANDS) -> dict[str, np.ndarray]:
@@ -118,7 +118,7 @@ def band_noise(image: np.ndarray, pool: dict[str, float] = PRINT_BANDS) -> dict[
     maps = {1: cv2.resize(grey, (n // 2, n // 2), interpolation=cv2.INTER_AREA),
             2: cv2.resize(grey, (n // 4, n // 4), interpolation=cv2.INTER_AREA),
             3: cv2.resize(grey[:e, :e], (n // 8, n // 8), interpolation=cv2.INTER_AREA)}
-    noise = {lvl: PRINT_NOISE * np.minimum(_srgb_slope(m.astype(np.float64)) ** 2, 100.0) for lvl, m in maps.items()}
+    noise = {lvl: PRINT_NOISE * np.minimum(srgb_slope(m.astype(np.float64)) ** 2, 100.0) for lvl, m in maps.items()}
     return {b: noise[int(b[-3])] for b in pool}
 
 

@@ -21,7 +21,8 @@ from . import bands, print_fold
 from .print_carriers import PILOTS, PrintLayout, filters, flat, noise_map, print_layout
 from .print_source import plane_idct, prior_spectrum
 
-__all__ = ["despread", "read_carriers", "band_response", "band_weights", "Reading", "restore", "restore_layout"]
+__all__ = ["despread", "read_carriers", "band_response", "band_weights", "band_fit", "per_band", "Reading", "restore",
+           "restore_layout"]
 
 
 def despread(image: np.ndarray, res: int, channels: int, capture: np.ndarray | None = None,
@@ -59,13 +60,13 @@ def _chip_bands(lay: PrintLayout) -> np.ndarray:
     return np.searchsorted(edges, lay.chips, side="right")
 
 
-def _per_band(band: np.ndarray, x: np.ndarray, nb: int) -> np.ndarray:
+def per_band(band: np.ndarray, x: np.ndarray, nb: int) -> np.ndarray:
     """x (N, K) at chips whose bands are `band` (N, K) -> (N, nb) the sums of x over each band's chips."""
     idx = (np.arange(len(x))[:, None] * nb + band).ravel()
     return np.bincount(idx, weights=x.ravel(), minlength=len(x) * nb).reshape(len(x), nb)
 
 
-def _band_fit(read: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def band_fit(read: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per band, the least-squares gain (nb,) of partial readings (n, nb) on their reference (n, nb), and
     the residuals (n, nb)."""
     gain = np.einsum("nb,nb->b", read, ref) / np.maximum(np.einsum("nb,nb->b", ref, ref), 1e-30)
@@ -80,10 +81,10 @@ def band_response(capture: np.ndarray, snapshot: np.ndarray, lay: PrintLayout) -
     cap = capture / 255.0
     w, q = filters(lay, cap)
     band, nb = _chip_bands(lay), len(lay.bands)
-    read = _per_band(band, flat(bands.analyse(cap), lay.bands)[lay.chips] * q, nb)
-    sent = _per_band(band, flat(bands.analyse(snapshot / 255.0), lay.bands)[lay.chips] * q, nb)
-    var = _per_band(band, q * q * noise_map(cap, lay.bands)[lay.chips], nb)
-    gain, resid = _band_fit(read, sent)
+    read = per_band(band, flat(bands.analyse(cap), lay.bands)[lay.chips] * q, nb)
+    sent = per_band(band, flat(bands.analyse(snapshot / 255.0), lay.bands)[lay.chips] * q, nb)
+    var = per_band(band, q * q * noise_map(cap, lay.bands)[lay.chips], nb)
+    gain, resid = band_fit(read, sent)
     return gain, np.sum(resid ** 2, axis=0) / np.maximum(var.sum(0), 1e-30)
 
 
@@ -102,16 +103,16 @@ def band_weights(lay: PrintLayout, chips: np.ndarray, w: np.ndarray, q: np.ndarr
     band = _chip_bands(lay)
     nb, p = len(lay.bands), slice(0, PILOTS)
 
-    def per_band(x):   # (PILOTS, K) -> (PILOTS, nb) sums of x over each band's chips
-        return _per_band(band[p], x, nb)
+    def pilot_bands(x):   # (PILOTS, K) -> (PILOTS, nb) sums of x over each band's chips
+        return per_band(band[p], x, nb)
 
-    shape = per_band(q[p] * w[p]) * (lay.pilot_amp * lay.pilot_signs)[:, None]   # a pilot's value per band
-    read = per_band(q[p] * chips[p])
-    gain, resid = _band_fit(read, shape)
+    shape = pilot_bands(q[p] * w[p]) * (lay.pilot_amp * lay.pilot_signs)[:, None]   # a pilot's value per band
+    read = pilot_bands(q[p] * chips[p])
+    gain, resid = band_fit(read, shape)
     cov = resid.T @ resid / PILOTS
     cov += np.eye(nb) * 1e-3 * np.trace(cov) / nb          # a little shrinkage: 256 pilots, nb x nb
     beta = np.linalg.solve(cov, gain * np.abs(shape).mean(0))
-    share = _per_band(band, q * w, nb)   # each carrier's designed response per band
+    share = per_band(band, q * w, nb)   # each carrier's designed response per band
     resp = share @ (beta * gain)
     if 2 * np.count_nonzero(resp > 0) <= len(resp):   # most carriers would read with the wrong sign
         return q, noise

@@ -55,7 +55,7 @@ class FrontEnd(nn.Module):
         return x + F.pixel_shuffle(self.out(h), 4) * 0.1
 
 
-def _haar(x: Tensor):
+def haar(x: Tensor):
     a, b, c, d = x[..., 0::2, 0::2], x[..., 0::2, 1::2], x[..., 1::2, 0::2], x[..., 1::2, 1::2]
     return (a + b + c + d) / 2, {"LH": (a - b + c - d) / 2, "HL": (a + b - c - d) / 2, "HH": (a - b - c + d) / 2}
 
@@ -70,7 +70,7 @@ def pool_bands(img: Tensor) -> dict[str, Tensor]:
         for level in (1, 2, 3):
             if not any(b.startswith(f"{colour}{level}") for b in PRINT_BANDS):
                 break
-            ll, det = _haar(ll)
+            ll, det = haar(ll)
             for o, v in det.items():
                 if f"{colour}{level}{o}" in PRINT_BANDS:
                     out[f"{colour}{level}{o}"] = v

@@ -8,6 +8,8 @@ the shell between the cubes of half-size 1 and 2. Its density is zero inside the
 explain what is seen. A ray is composited in order: the segment before the box (evenly spaced), the box's
 samples (`render.render_rays`), the segment after it (evenly spaced in inverse distance, out to `T_MAX`), then the
 per-direction colour. A ray that misses the box has its two segments meet at its closest approach to the centre.
+The regularisers tried against floaters in the box (distortion, opacity, walls, floor; all off by default, as
+measured in docs/capture.md) are plain functions here, summed by `render_and_regularise` for `fit.train_step`.
 """
 from __future__ import annotations
 
@@ -17,11 +19,13 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from .field import composite
+from .field import composite, decode, sample_planes
 from .render import render_rays
 from .sampler import BoxFrame, ray_box
 
-__all__ = ["contract", "OuterField", "outer_query", "env_colour", "segment_samples", "render_with_background"]
+__all__ = ["contract", "OuterField", "outer_query", "env_colour", "segment_samples", "render_with_background",
+           "distortion_loss", "opacity_entropy", "explained_by_background", "wall_points", "floor_points",
+           "render_and_regularise"]
 
 T_MAX = 200.0     # q-space distance (box half-sizes) where the after-segment ends and the colour per direction starts
 ENV_SIZE = (8, 16)  # the colour per direction: latitude x longitude cells
@@ -79,9 +83,11 @@ def segment_samples(t0: Tensor, t1: Tensor, n: int, disparity: bool, jitter: boo
 
 def render_with_background(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor | None, bg: OuterField,
                            o: Tensor, d: Tensor, samples: int, jitter: bool = False, generator=None,
-                           min_transmittance: float = 0.0):
+                           min_transmittance: float = 0.0, extras: bool = False):
     """q-space rays (N, 3), unit dirs -> colour (N, 3) of the planes in front of the background, the planes'
-    opacity (N,), number of box samples evaluated. Differentiable in the planes and `bg`."""
+    opacity (N,), number of box samples evaluated; with `extras`, also {"weights": the box samples' weights
+    (N, S), evenly spaced by frame.step; "background_alone": the colour (N, 3) the ray would have with the box
+    empty}. Differentiable in the planes and `bg`."""
     near, far = ray_box(o, d, frame.half_unit)
     closest = (-(o * d).sum(-1)).clamp(min=0)
     hit = near < far
@@ -93,7 +99,85 @@ def render_with_background(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor
     sigma, rgb = outer_query(bg.grid, frame.q_to_unit(pts.reshape(-1, 3)))
     sigma, rgb = sigma.view(t.shape), rgb.view(*t.shape, 3)
     after, _, _ = composite(sigma[:, samples:], rgb[:, samples:], da, env_colour(bg.env, d))
-    box, acc, n_box = render_rays(planes, decoder, frame, occ, o, d, jitter=jitter, generator=generator,
-                                  min_transmittance=min_transmittance, background=after)
+    box, acc, n_box, *weights = render_rays(planes, decoder, frame, occ, o, d, jitter=jitter, generator=generator,
+                                            min_transmittance=min_transmittance, background=after, with_weights=extras)
     colour, _, _ = composite(sigma[:, :samples], rgb[:, :samples], db, box)
-    return colour, acc, n_box
+    if not extras:
+        return colour, acc, n_box
+    alone, _, _ = composite(sigma[:, :samples], rgb[:, :samples], db, after)
+    return colour, acc, n_box, {"weights": weights[0], "background_alone": alone}
+
+
+def distortion_loss(weights: Tensor, step: float) -> Tensor:
+    """mip-NeRF 360's distortion loss of weights (N, S) at samples evenly spaced by `step` along each ray ->
+    (N,): sum_ij w_i w_j |t_i - t_j| + step / 3 sum_i w_i^2, small when each ray's weight is one compact lump
+    (a surface), large when it is spread along the ray (semi-transparent floaters). Pairs in O(S) by prefix sums."""
+    t = torch.arange(weights.shape[1], dtype=weights.dtype, device=weights.device) * step
+    wt = weights * t
+    w_before, wt_before = torch.cumsum(weights, 1) - weights, torch.cumsum(wt, 1) - wt
+    return 2 * (weights * (t * w_before - wt_before)).sum(1) + step / 3 * (weights ** 2).sum(1)
+
+
+def opacity_entropy(acc: Tensor, eps: float = 1e-4) -> Tensor:
+    """Binary entropy (nats) of the planes' opacity (N,) per ray -> (N,): zero for a ray that ends on the object
+    (1) or passes through to the background (0), largest for a half-transparent one."""
+    a = acc.clamp(eps, 1 - eps)
+    return -(a * torch.log(a) + (1 - a) * torch.log(1 - a))
+
+
+def floor_points(n: int, band: float, generator: torch.Generator | None = None) -> tuple[Tensor, Tensor]:
+    """n random points (n, 3) in plane coordinates in the box's floor band (z within `band` of -1), and for each
+    3 points (n, 3, 3) of its column above the band (z at -1 + 2 band, 3 band, 4 band): where nothing stands on
+    the floor, the floor band should be empty (the ground belongs to the background model)."""
+    u = torch.rand(n, 3, generator=generator) * 2 - 1
+    u[:, 2] = -1 + band * torch.rand(n, generator=generator)
+    above = u[:, None].repeat(1, 3, 1)
+    above[:, :, 2] = -1 + band * torch.tensor([2.0, 3.0, 4.0])
+    return u, above
+
+
+def explained_by_background(background_alone: Tensor, target: Tensor, tol: float = 0.05) -> Tensor:
+    """Colour (N, 3) of each ray with the box empty and the pixels' target (N, 3) -> (N,) in [0, 1], no gradient:
+    1 where the background model alone already gives the pixel (rms error well under `tol`), falling to 0 past
+    it; the rays that should pass through the box to the background."""
+    err = ((background_alone.detach() - target) ** 2).mean(-1).sqrt()
+    return torch.exp(-(err / tol) ** 2)
+
+
+def wall_points(n: int, margin: float, generator: torch.Generator | None = None) -> Tensor:
+    """n random points (n, 3) in plane coordinates ([-1, 1]^3) within `margin` of one of the box's side walls
+    (x, y = +-1) or its top (z = 1), never its floor, where the object stands on the ground cut."""
+    u = torch.rand(n, 3, generator=generator) * 2 - 1
+    face = torch.randint(0, 5, (n,), generator=generator)   # -x, +x, -y, +y, +z
+    axis, sign = torch.tensor([0, 0, 1, 1, 2])[face], torch.tensor([-1.0, 1.0, -1.0, 1.0, 1.0])[face]
+    depth = torch.rand(n, generator=generator) * margin
+    u[torch.arange(n), axis] = sign * (1 - depth)
+    return u
+
+
+def render_and_regularise(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor | None, bg: OuterField, cfg, o: Tensor,
+                          d: Tensor, target: Tensor, gen: torch.Generator):
+    """One training batch with the background model: q-space rays (N, 3), unit dirs, target RGB (N, 3) in [0, 1]
+    -> colour (N, 3) (jittered samples), samples evaluated, and the sum of the regularisers on the planes that
+    `cfg` (a FitConfig) turns on (distortion, opacity, walls, floor; None when all weights are 0)."""
+    extras = cfg.distortion_weight > 0 or cfg.opacity_weight > 0
+    out = render_with_background(planes, decoder, frame, occ, bg, o, d, cfg.background_samples, jitter=True,
+                                 generator=gen, min_transmittance=cfg.min_transmittance, extras=extras)
+    color, acc, n_samples = out[:3]
+    terms = []
+    if cfg.distortion_weight > 0:
+        terms.append(cfg.distortion_weight * distortion_loss(out[3]["weights"], frame.step).mean())
+    if cfg.opacity_weight > 0:   # the entropy of each ray's opacity, or its opacity where the background explains it
+        terms.append(cfg.opacity_weight * opacity_entropy(acc).mean() if cfg.opacity_entropy else
+                     cfg.opacity_weight * (explained_by_background(out[3]["background_alone"], target) * acc).mean())
+    if cfg.wall_weight > 0:
+        pts = wall_points(cfg.batch_rays // 4, cfg.wall_margin, gen).to(o.device)
+        terms.append(cfg.wall_weight * torch.mean(1 - torch.exp(-decode(sample_planes(planes, pts), decoder)[0]
+                                                                * frame.step)))
+    if cfg.floor_weight > 0:   # the floor band, weighted by how empty its column is just above
+        pts, above = floor_points(cfg.batch_rays // 4, cfg.wall_margin, gen)
+        sigma = decode(sample_planes(planes, torch.cat([pts, above.reshape(-1, 3)]).to(o.device)), decoder)[0]
+        alpha = 1 - torch.exp(-sigma * frame.step)
+        empty_above = 1 - alpha[pts.shape[0]:].detach().view(-1, 3).amax(1)
+        terms.append(cfg.floor_weight * torch.mean(empty_above * alpha[:pts.shape[0]]))
+    return color, n_samples, (sum(terms) if terms else None)

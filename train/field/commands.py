@@ -124,6 +124,7 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
     box, info = tighten_box(posed, decoder, cfg, device)
     read = posed.info["capture"]
     ground = f", the ground at z = {info['ground_z']:.3g}" if info["ground_z"] is not None else ""
+    ground += ", sides and top cut" if info.get("sides_cut") else ""
     read.update(box=box.tolist(), box_from=read["box_from"] + f"; tightened from {info['prefit_steps']} steps' "
                 f"density{ground}")
     if not quiet:

@@ -51,6 +51,21 @@ class FitConfig:
                                            "box and as many after it")
     background_lr: float = config_field(0.05, "with --background outer: the outer field's learning rate (decayed as "
                                         "the planes')")
+    distortion_weight: float = config_field(0.0, "with --background outer: weight of mip-NeRF 360's distortion loss "
+                                            "on the box samples' weights (floaters spread along a ray cost)")
+    opacity_weight: float = config_field(0.0, "with --background outer: weight of each ray's opacity in the box "
+                                         "where the background model alone already gives its pixel")
+    opacity_entropy: bool = config_field(False, "with --background outer: that weight on the binary entropy of every "
+                                         "ray's opacity instead (a ray ends on the object or passes to the background)")
+    wall_weight: float = config_field(0.0, "with --background outer: weight of a density penalty at random points "
+                                      "near the box's side walls and top (not its floor)")
+    floor_weight: float = config_field(0.0, "with --background outer: weight of a density penalty in the box's floor "
+                                       "band where nothing stands above it (the ground left over the ground cut)")
+    wall_margin: float = config_field(0.15, "with --background outer: depth of the walls' and the floor's bands, a "
+                                      "fraction of the box's half-size (at most 0.25)")
+    tighten_sides: bool = config_field(True, "with --background outer and --box auto: the short pre-fit also cuts "
+                                       "the box's sides and top to where its density lies, with a margin "
+                                       "(train/field/box_tighten.py; fewer floaters, bench capture-background)")
 
 
 @dataclass
@@ -91,6 +106,10 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
         problems.append(f"--background must be white or outer, not {cfg.background!r}")
     if cfg.background_res < 4 or cfg.background_samples < 2 or not cfg.background_lr > 0:
         problems.append("--background-res must be >= 4, --background-samples >= 2, --background-lr > 0")
+    if min(cfg.distortion_weight, cfg.opacity_weight, cfg.wall_weight, cfg.floor_weight) < 0 or \
+            not 0 < cfg.wall_margin <= 0.25:
+        problems.append("--distortion-weight, --opacity-weight, --wall-weight and --floor-weight must be >= 0, "
+                        "--wall-margin in (0, 0.25]")
     if cfg.decoder not in formats.DECODERS:
         problems.append(f"--decoder must be one of {', '.join(formats.DECODERS)}, not {cfg.decoder!r}")
     if problems:

@@ -142,17 +142,19 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     if plane_noise > 0:
         planes = planes + plane_noise * torch.randn(planes.shape, generator=gen).to(planes.device)
     occ = st.occ.occ if cfg.occupancy else None
+    bg_terms = None
     if st.background is not None:
-        from .background import render_with_background
-        color, _, n_samples = render_with_background(planes, decoder, st.frame, occ, st.background, o, d,
-                                                     cfg.background_samples, jitter=True, generator=gen,
-                                                     min_transmittance=cfg.min_transmittance)
+        from .background import render_and_regularise
+        color, n_samples, bg_terms = render_and_regularise(planes, decoder, st.frame, occ, st.background, cfg, o, d,
+                                                           target, gen)
     else:
         color, _, n_samples = render_rays(planes, decoder, st.frame, occ, o, d, jitter=True, generator=gen,
                                           min_transmittance=cfg.min_transmittance)
     st.samples += n_samples
     mse = torch.mean((color - target) ** 2)
     loss = mse + cfg.tv_weight * _tv(st.planes.planes) if cfg.tv_weight else mse
+    if bg_terms is not None:
+        loss = loss + bg_terms
     if cfg.empty_weight and st.occ.outside_hull:
         loss = loss + cfg.empty_weight * _empty_alpha(planes, decoder, st, cfg.batch_rays // 2, gen)
     st.opt.zero_grad(set_to_none=True)

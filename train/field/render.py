@@ -34,10 +34,11 @@ def occupancy_from_planes(planes: Tensor, decoder, frame: BoxFrame, res: int = f
 
 def render_rays(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor | None, o: Tensor, d: Tensor,
                 jitter: bool = False, generator=None, min_transmittance: float = 0.0,
-                background: float | Tensor = formats.BACKGROUND):
+                background: float | Tensor = formats.BACKGROUND, with_weights: bool = False):
     """q-space rays (N, 3) -> colour (N, 3) over `background` (white, or a colour (N, 3) per ray: what lies
     behind the box, `background.render_with_background`), opacity (N,), number of samples evaluated with
-    gradient. Differentiable in planes/decoder. With `min_transmittance` > 0, a first pass without
+    gradient; `with_weights`: also the samples' compositing weights (N, S), evenly spaced by frame.step along
+    each ray (zero where a sample was skipped). Differentiable in planes/decoder. With `min_transmittance` > 0, a first pass without
     gradient finds where each ray is already opaque and the samples behind are dropped (early ray
     termination, as in NerfAcc)."""
     s = march(o, d, frame, occ, jitter=jitter, generator=generator)
@@ -52,8 +53,8 @@ def render_rays(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor | None, o:
     sigma_s, rgb_s = decode(sample_planes(planes, unit), decoder)
     sigma = torch.zeros(s.n_rays, s.width, device=o.device).index_put((ray, idx), sigma_s)
     rgb = torch.zeros(s.n_rays, s.width, 3, device=o.device).index_put((ray, idx), rgb_s)
-    color, acc, _ = composite(sigma, rgb, frame.step, background)
-    return color, acc, int(ray.shape[0])
+    color, acc, weights = composite(sigma, rgb, frame.step, background)
+    return (color, acc, int(ray.shape[0])) + ((weights,) if with_weights else ())
 
 
 @torch.no_grad()
