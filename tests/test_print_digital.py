@@ -84,7 +84,7 @@ def test_clean_snapshot_decodes_every_layer(planes):
     assert rd.layers == len(plan) and rd.bits == sum(k - 16 for _, k in plan)
     assert rd.mutual_info_bits > rd.bits
     expect = ds.decode_segments(ds.encode_segments(planes, [k - 16 for _, k in plan]), 16, 4)
-    assert np.allclose(got, expect, atol=1e-6)
+    assert np.allclose(got, expect, rtol=1e-6, atol=1e-6)
 
 
 def test_unknown_code_is_one_line_error():

@@ -146,8 +146,11 @@ def test_bake_writes_the_same_grid_as_cell_by_cell(res):
     models, frame = field_models(decoder=scene.decoder_version), Frame.from_box(scene.box)
     baked = bake_field(models, pad_planes(scene.planes()), frame, res)
     grid, sigma, atlas, evaluated = _bake_by_cells(models, pad_planes(scene.planes()), frame, res)
-    assert baked.grid.shape == grid.shape and np.array_equal(baked.grid, grid)
-    assert np.array_equal(baked.sigma, sigma) and np.array_equal(baked.atlas, atlas) and baked.evaluated == evaluated
+    # the same cells through the same graph, in other batches: onnxruntime's kernels may round a batch differently
+    # on another CPU, so the numbers are compared relative to their size (bit-identical here, on AMD EPYC)
+    close = lambda a, b: a.shape == b.shape and np.allclose(a, b, rtol=1e-6, atol=1e-6)  # noqa: E731
+    assert close(baked.grid, grid) and close(baked.sigma, sigma) and close(baked.atlas, atlas)
+    assert baked.evaluated == evaluated
     assert np.shares_memory(baked.grid, baked.atlas)  # one copy of the grid, not two
     assert np.array_equal(Baked(np.ascontiguousarray(baked.grid), baked.sigma, 0).atlas, baked.atlas)
 
@@ -161,7 +164,7 @@ def test_view_rays_in_blas_sized_parts_match_one_product():
     for k in range(3):
         _, d = view_rays(c2w[k], intr[k], 380, 380, Frame.from_box(scene.box))
         whole = _camera_dirs(*[float(x) for x in intr[k]], 380, 380) @ np.asarray(c2w[k])[:3, :3].T.astype(np.float32)
-        assert d.dtype == np.float32 and np.array_equal(d, whole)
+        assert d.dtype == np.float32 and np.allclose(d, whole, rtol=1e-6, atol=1e-7)   # BLAS kernels differ by CPU
 
 
 def test_sessions_do_not_spin():
