@@ -27,7 +27,8 @@ __all__ = ["MODES", "fit_and_score", "bench_capture_background_command", "bench_
 PLAIN = {"distortion_weight": 0.0, "opacity_weight": 0.0, "opacity_entropy": False, "wall_weight": 0.0,
          "floor_weight": 0.0, "tighten_sides": False}
 _SIDES_WALLS = {**PLAIN, "tighten_sides": True, "wall_weight": 0.3}
-# mode: (file read, background, box, FitConfig fields over the bench's); `outer` is --background outer with its
+# mode: (file read, background, box, FitConfig fields over the bench's; poses as given unless the mode says
+# otherwise, so that the modes compare like with like); `outer` is --background outer with its
 # defaults, the other outer-* modes are the candidates against floaters (docs/capture.md), kept as rows
 MODES = {"white": ("transforms.json", "white", None, {}),
          "outer": ("transforms.json", "outer", "auto", {}),
@@ -40,16 +41,19 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-sides": ("transforms.json", "outer", "auto", {**PLAIN, "tighten_sides": True}),
          "outer-sides-walls": ("transforms.json", "outer", "auto", _SIDES_WALLS),
          "outer-sides-walls-floor": ("transforms.json", "outer", "auto", {**_SIDES_WALLS, "floor_weight": 1.0}),
-         "masked": ("gt/transforms_masked.json", "white", None, {})}
+         "outer-ground": ("transforms.json", "outer", "auto", {"ground_texture": 128}),
+         "masked": ("gt/transforms_masked.json", "white", None, {}),
+         "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
+         "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"})}
 # `bench fit --captures` (issue 40 item 4): this bench with these settings
 CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size": 128, "views": 48, "steps": 150,
                     "occ_warmup": 32, "plane_res": 64, "plane_channels": 8, "seed": 0}
 CAPTURE_QUICK = {"size": 48, "views": 8, "steps": 20}
 
 
-def fit_and_score(cap: Path, mode: str, cfg: FitConfig) -> dict:
+def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = None) -> dict:
     """Fit capture folder `cap` (written by make-capture) the way `mode` says, in the world of its truth.json
-    (--up 0,0,1), and score it against the true masks and box."""
+    (--up 0,0,1), and score it against the true masks and box; with `figure`, also write `_side_by_side` there."""
     import torch
 
     from snapshot3d.loaders import load_scene
@@ -59,15 +63,38 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig) -> dict:
 
     name, background, box, fields = MODES[mode]
     t0 = time.perf_counter()
-    scene, report, _ = fit_scene(str(cap / name), replace(cfg, background=background, **fields), quiet=True,
+    scene, report, renders = fit_scene(str(cap / name), replace(cfg, background=background, **{"refine_poses": "off", **fields}), quiet=True,
                                  capture=CaptureOptions(up=(0.0, 0.0, 1.0), box=box))
     seconds = time.perf_counter() - t0
-    truth = load_scene(str(cap / "gt/transforms_masked.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
+    true_poses = cap / "gt/transforms_true.json"   # absent in captures written before it was
+    truth = load_scene(str(true_poses if true_poses.is_file() else cap / "gt/transforms_masked.json"),
+                       capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
     true_box = json.loads((cap / "gt/truth.json").read_text())["box"]
     score = score_object(torch.from_numpy(scene.planes()), load_decoder(cfg.decoder), scene.box, truth, true_box)
+    if figure is not None and renders is not None:
+        photos = load_scene(str(cap / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
+        _side_by_side(figure, scene, truth, photos.images, renders, load_decoder(cfg.decoder))
     return {"mode": mode, **{k: round(v, 4) for k, v in score.items()}, "field_psnr": report["field_psnr"],
             "fit_seconds": round(seconds, 1), "box": np.round(scene.box, 3).tolist(),
-            "box_from": report.get("capture", {}).get("box_from"), **report.get("background", {})}
+            "box_from": report.get("capture", {}).get("box_from"), **report.get("background", {}),
+            **({"pose_refinement": report["pose_refinement"]} if "pose_refinement" in report else {})}
+
+
+def _side_by_side(path: Path, scene, truth, photos: np.ndarray, renders: np.ndarray, decoder, views: int = 3) -> None:
+    """PNG of `views` held-out frames, one per row: the input photo (`photos` (N, H, W, 3) RGB, the capture as
+    read), the fit with its background model behind the planes (`renders`, (V, H, W, 3) RGB of the held-out
+    frames, from fit_scene), and the object alone over white (what the snapshot carries) at the frames' true
+    poses."""
+    import torch
+
+    from snapshot3d.images import contact_sheet, write_png
+    from snapshot3d.train.field.render import render_views
+
+    idx = truth.test[:views]
+    alone = render_views(torch.from_numpy(scene.planes()), decoder, scene.box, truth.c2w[idx], truth.intrinsics[idx],
+                         truth.width, truth.height)
+    tiles = np.stack([t for k, i in enumerate(idx) for t in (photos[i], renders[k], alone[k])])
+    write_png(path, contact_sheet(tiles, cols=3))
 
 
 def bench_fit_command(args) -> int:
@@ -90,18 +117,22 @@ def bench_capture_background_command(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     cfg = FitConfig(steps=args.steps, plane_res=args.plane_res, plane_channels=args.plane_channels, seed=args.seed,
                     occ_warmup=args.occ_warmup)
-    capcfg = SynthCaptureConfig(size=args.size, views=args.views, seed=args.seed)
-    rows = []
+    capcfg = SynthCaptureConfig(size=args.size, views=args.views, seed=args.seed,
+                                pose_noise_deg=getattr(args, "pose_noise_deg", 0.0),
+                                pose_noise_frac=getattr(args, "pose_noise_frac", 0.0))
+    rows, name = [], getattr(args, "name", None) or "capture_background"
     with tempfile.TemporaryDirectory() as tmp:
         for mesh in args.meshes.split(","):
             cap = make_capture(f"builtin:{mesh}", Path(tmp) / mesh, capcfg)
             for mode in args.modes.split(","):
-                row = {"mesh": mesh, **fit_and_score(cap, mode, cfg)}
+                fig = out / f"{name}_side_by_side_{mesh}.png" if getattr(args, "figure", False) and \
+                    mode.startswith("outer") else None
+                row = {"mesh": mesh, **fit_and_score(cap, mode, cfg, fig)}
                 print(json.dumps(row), flush=True)
                 rows.append(row)
     report = {"meta": run_metadata(), "fit": asdict(cfg), "capture": {**asdict(capcfg), "lens": list(capcfg.lens)},
               "rows": rows}
-    (out / "capture_background.json").write_text(json.dumps(report, indent=1))
-    write_rows(out / "capture_background.csv", rows)
-    print(f"wrote {out / 'capture_background.json'} and .csv ({len(rows)} fits)")
+    (out / f"{name}.json").write_text(json.dumps(report, indent=1))
+    write_rows(out / f"{name}.csv", rows)
+    print(f"wrote {out / name}.json and .csv ({len(rows)} fits)")
     return 0

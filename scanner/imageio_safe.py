@@ -3,9 +3,9 @@
 `read_image_bgr` checks, before decoding, that the file exists, is an image (by its header, via
 Pillow's lazy open), is within MAX_PIXELS (a decompression bomb is refused before any pixel buffer
 is allocated; `snapshot3d.validate` holds the limits), is one of the formats read here and, for JPEG and PNG,
-is complete (no truncation); then OpenCV decodes it, its log at errors only and what its C decoders write to
-stderr sent to the `snapshot3d.imageio` log (`quiet_stderr`). Every failure is a one-line `UserError` naming
-the cause."""
+is complete (no truncation); then `snapshot3d.image_decode.decode_image` decodes it with nothing written to
+stderr (Pillow's silent libjpeg for JPEG; a PNG's chunks checked before OpenCV reads them; OpenCV's log off),
+so no thread ever needs stderr pointed elsewhere. Every failure is a one-line `UserError` naming the cause."""
 from __future__ import annotations
 
 import logging
@@ -21,10 +21,10 @@ import cv2
 import numpy as np
 
 from snapshot3d.errors import UserError
-from snapshot3d.images import quiet_stderr
+from snapshot3d.image_decode import decode_image
 from snapshot3d.validate import MAX_BYTES, MAX_PIXELS, check_image_size
 
-__all__ = ["MAX_PIXELS", "MAX_BYTES", "read_image_bgr", "image_size", "quiet_stderr", "write_atomic", "write_image"]
+__all__ = ["MAX_PIXELS", "MAX_BYTES", "read_image_bgr", "image_size", "write_atomic", "write_image"]
 
 _FORMATS = ("JPEG", "MPO", "PNG", "WEBP", "BMP", "TIFF")   # what OpenCV decodes here (MPO: a phone's JPEG)
 _MAGIC = ((b"\xff\xd8", "JPEG"), (b"\x89PNG", "PNG"), (b"GIF8", "GIF"), (b"BM", "BMP"), (b"RIFF", "WebP"),
@@ -109,12 +109,9 @@ def read_image_bgr(path, what: str = "photo") -> np.ndarray:
     if fmt == "PNG" and b"IEND" not in data[-64:]:
         raise UserError(f"{path.name} is a corrupt or truncated PNG file")
     try:
-        with quiet_stderr():
-            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-    except cv2.error as e:
-        raise UserError(f"{path.name} is a corrupt image file (OpenCV: {str(e).strip().splitlines()[-1][:80]})") from None
-    if img is None or img.size == 0:
-        raise UserError(f"{path.name} is a corrupt image file (cannot decode its {fmt} data)")
+        img = decode_image(data)
+    except ValueError as e:
+        raise UserError(f"{path.name} is a corrupt {fmt} file ({e})") from None
     if sorted(img.shape[:2]) != sorted((w, h)):   # the header's size was checked; the decoder must agree
         raise UserError(f"{path.name} decodes to {img.shape[1]}x{img.shape[0]}, not the {w}x{h} its header declares")
     return img

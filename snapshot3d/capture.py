@@ -14,9 +14,12 @@ from .errors import UserError
 from .posed import PosedImages
 
 __all__ = ["CaptureOptions", "parse_box", "parse_up", "up_rotation", "split", "shrink", "describe", "assemble",
-           "builtin_options", "fit_box", "box_from_cameras"]
+           "builtin_options", "fit_box", "box_from_cameras", "WHITE_BORDER", "choose_background", "with_overlap_box"]
 
 DEFAULT_BOX = np.array([[-1.5, -1.5, -1.5], [1.5, 1.5, 1.5]], np.float32)  # NeRF-Synthetic convention
+# `fit --background auto`: a capture without masks is "on white" when this share of its frames' border pixels is
+# near white (every channel above 0.9): a light box or a paper sweep, which the white background explains
+WHITE_BORDER = 0.5
 
 
 @dataclass(frozen=True)
@@ -205,6 +208,36 @@ def assemble(frames: list, opts: CaptureOptions, *, where: str, name: str, layou
     return PosedImages(images=np.stack([f[0] for f in frames]).astype(np.float32), alpha=alpha, c2w=c2w,
                        intrinsics=intr, box=box, train=np.asarray(train), test=np.asarray(test), name=name,
                        skipped=int(sum(skipped.values())), info={"layout": layout, "capture": info})
+
+
+def choose_background(posed: PosedImages, border: float = 0.04) -> tuple[str, str]:
+    """`fit --background auto` -> ("white" or "outer", why): white when the capture has masks (the object is
+    composited on white) or its frames' borders (`border` of each side) are mostly near white; else outer (a room
+    around the object, which the planes must not explain)."""
+    if posed.alpha is not None:
+        return "white", "auto: the capture has masks"
+    n, h, w, _ = posed.images.shape
+    bh, bw = max(1, round(h * border)), max(1, round(w * border))
+    edge = np.concatenate([posed.images[:, :bh].reshape(-1, 3), posed.images[:, -bh:].reshape(-1, 3),
+                           posed.images[:, :, :bw].reshape(-1, 3), posed.images[:, :, -bw:].reshape(-1, 3)])
+    white = float((edge.min(axis=1) > 0.9).mean())
+    if white >= WHITE_BORDER:
+        return "white", f"auto: no masks, {white:.0%} of the frames' border is white"
+    return "outer", f"auto: no masks, and only {white:.0%} of the frames' border is white (a room round the object)"
+
+
+def with_overlap_box(posed: PosedImages) -> PosedImages:
+    """`posed` with the automatic box (`--box auto`) in place of the cameras' own, when that is where its box came
+    from (a --box given, or one carved from masks, is kept)."""
+    read = dict(posed.info.get("capture") or {})
+    if posed.alpha is not None or read.get("box_from") != "from the cameras":
+        return posed
+    from .auto_box import OVERLAP_SHARE, overlap_box
+    box = validate.check_box(overlap_box(posed.c2w, posed.intrinsics, posed.width, posed.height),
+                             "the scene box found")
+    read.update(box=box.tolist(), box_from=f"auto: the cube {OVERLAP_SHARE:.0%} of the views hold, round the "
+                "cameras' look-at point")
+    return replace(posed, box=box, info={**posed.info, "capture": read})
 
 
 def builtin_options(posed: PosedImages, opts: CaptureOptions) -> PosedImages:

@@ -1,58 +1,18 @@
 """Writing views: PNG files, an animated GIF turntable and a contact sheet (numpy, OpenCV, Pillow); a
-snapshot as the restore graphs take it (`snapshot_nchw`); and keeping C image decoders' messages off the
-terminal (`quiet_stderr`).
+snapshot as the restore graphs take it (`snapshot_nchw`). Reading an image file with nothing written to
+stderr: `snapshot3d.image_decode`.
 
 Views are (N, H, W, 3) float32 RGB in [0, 1] or uint8 RGB."""
 from __future__ import annotations
 
-import logging
 import math
-import os
-import sys
-import tempfile
-import threading
-from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
 import numpy as np
 from PIL import Image
 
-_log = logging.getLogger("snapshot3d.imageio")
-_stderr_lock = threading.Lock()
-_stderr_state = {"depth": 0, "saved": None, "sink": None}
-
-__all__ = ["quiet_stderr", "to_uint8", "snapshot_nchw", "fit_square", "write_png", "write_views", "write_gif", "contact_sheet"]
-
-
-@contextmanager
-def quiet_stderr():
-    """Send what C libraries write to file descriptor 2 meanwhile (libjpeg's "Corrupt JPEG data", libpng's
-    warnings) to the `snapshot3d.imageio` log at INFO instead of the terminal, where the command line prints
-    one line. Nested and concurrent uses share one redirection: the first in redirects, the last out
-    restores stderr and logs the text."""
-    st = _stderr_state
-    with _stderr_lock:
-        if st["depth"] == 0:
-            sys.stderr.flush()
-            st["sink"] = tempfile.TemporaryFile()
-            st["saved"] = os.dup(2)
-            os.dup2(st["sink"].fileno(), 2)
-        st["depth"] += 1
-    try:
-        yield
-    finally:
-        with _stderr_lock:
-            st["depth"] -= 1
-            if st["depth"] == 0:
-                os.dup2(st["saved"], 2)
-                os.close(st["saved"])
-                sink = st["sink"]
-                sink.seek(0)
-                text = sink.read(1 << 16).decode("utf-8", "replace").strip()
-                sink.close()
-                if text:
-                    _log.info("decoder messages: %s", text.replace("\n", " | "))
+__all__ = ["to_uint8", "snapshot_nchw", "fit_square", "write_png", "write_views", "write_gif", "contact_sheet"]
 
 
 def to_uint8(img: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 from . import validate
 from .capture import CaptureOptions, assemble, box_from_cameras, builtin_options, check_holdout, fit_box, shrink
 from .errors import UserError
-from .images import quiet_stderr
+from .image_decode import decode_image
 from .lens import check_model, lens_coeffs, undistort
 from .posed import PosedImages
 
@@ -96,13 +96,12 @@ def _file_path(frame: dict, where: str) -> str:
 
 def _read_image(path: Path, downscale: int):
     """-> (H, W, 3) float32 RGB on white, (H, W) alpha or None. The header's size is checked against
-    `validate.MAX_PIXELS` before decoding; decoders' messages go to the log (`images.quiet_stderr`)."""
+    `validate.MAX_PIXELS` before decoding; nothing is written to stderr (`image_decode.decode_image`)."""
     _check_header(path)
     try:
-        with quiet_stderr():
-            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    except cv2.error:
-        img = None
+        img = decode_image(path.read_bytes(), unchanged=True)
+    except (OSError, ValueError) as e:   # ValueError names the fault: "CRC error in its IDAT chunk"
+        raise UserError(f"{path}: cannot read image ({getattr(e, 'strerror', None) or e})") from None
     if img is None or img.size == 0 or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (3, 4)):
         raise UserError(f"{path}: cannot read image")
     if img.ndim == 2:
@@ -213,8 +212,10 @@ def _read_mask(path: Path, size: tuple[int, int], where: str) -> np.ndarray:
     if not path.is_file():
         raise UserError(f"{path}: mask not found (named by a frame's mask_path in {where})")
     _check_header(path)
-    with quiet_stderr():
-        m = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    try:
+        m = decode_image(path.read_bytes(), unchanged=True)
+    except (OSError, ValueError) as e:
+        raise UserError(f"{path}: cannot read mask image ({getattr(e, 'strerror', None) or e})") from None
     if m is None or m.size == 0 or m.ndim not in (2, 3):
         raise UserError(f"{path}: cannot read mask image")
     m = (m.reshape(m.shape[0], m.shape[1], -1)[..., :3] > 0).any(-1).astype(np.float32)

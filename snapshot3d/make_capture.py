@@ -108,7 +108,7 @@ def write_capture(cap: dict, spec: str, cfg: SynthCaptureConfig, out: Path) -> N
     fx, fy, cx, cy = (float(v) for v in cap["intr"])
     head = {"camera_model": "OPENCV", "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": w, "h": h,
             "k1": k1, "k2": k2, "p1": p1, "p2": p2}
-    frames, masked, truth = [], [], []
+    frames, masked, true_posed, truth = [], [], [], []
     for i in range(n):
         name = f"frame_{i + 1:05d}.png"
         _png(out / "images" / name, cap["images"][i])
@@ -116,12 +116,16 @@ def write_capture(cap: dict, spec: str, cfg: SynthCaptureConfig, out: Path) -> N
         pose = np.round(cap["c2w_written"][i], 8).tolist()
         frames.append({"file_path": f"images/{name}", "transform_matrix": pose})
         masked.append({"file_path": f"../images/{name}", "mask_path": f"masks/{name}", "transform_matrix": pose})
+        true_posed.append({**masked[-1], "transform_matrix": np.round(cap["c2w_true"][i], 8).tolist()})
         truth.append({"file_path": f"images/{name}", "transform_matrix": np.round(cap["c2w_true"][i], 8).tolist(),
                       "exposure_gain_rgb": [round(float(g), 5) for g in cap["gains"][i]]})
     (out / "transforms.json").write_text(json.dumps({**head, "frames": frames}, indent=1))
     (out / "gt" / "transforms_masked.json").write_text(json.dumps({**head, "frames": masked}, indent=1))
+    (out / "gt" / "transforms_true.json").write_text(json.dumps({**head, "frames": true_posed}, indent=1))
     info = {"scene": spec, "config": {**asdict(cfg), "lens": list(cfg.lens)}, "box": cap["box"].tolist(),
             "world": "z up; the object stands on the ground plane z = box[0][2] (when there is one)",
+            "transforms_true": "gt/transforms_true.json: the masked capture with the true poses (what a fit is scored "
+                               "on; transforms*.json carry the poses with --pose-noise-*)",
             "masks": "gt/masks/*.png: 255 where the object covers at least half the pixel, in the written (distorted) "
                      "images", "sources": cap["sources"], "frames": truth}
     (out / "gt" / "truth.json").write_text(json.dumps(info, indent=1))
@@ -160,5 +164,5 @@ def make_capture_command(args) -> int:
     cfg = config_from_args(SynthCaptureConfig, args)
     out = make_capture(args.scene, args.output, cfg)
     print(f"wrote {cfg.views} frames of {cfg.size}x{max(8, round(cfg.size * 3 / 4))} to {out} (transforms.json; "
-          f"ground truth in {out / 'gt'}: masks, truth.json, transforms_masked.json)")
+          f"ground truth in {out / 'gt'}: masks, truth.json, transforms_masked.json, transforms_true.json)")
     return 0

@@ -57,7 +57,11 @@ def read_photo(spec: str, max_side: int = 1024) -> np.ndarray:
     else:
         if not Path(spec).is_file():
             raise UserError(f"backdrop photo not found: {spec}")
-        bgr = cv2.imread(spec, cv2.IMREAD_COLOR)
+        from .image_decode import decode_image
+        try:
+            bgr = decode_image(Path(spec).read_bytes())
+        except (OSError, ValueError):
+            bgr = None
         if bgr is None or min(bgr.shape[:2]) < 8:
             raise UserError(f"{spec}: cannot read the backdrop photo (not an image, or smaller than 8 px)")
         img = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)

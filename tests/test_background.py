@@ -60,17 +60,24 @@ def test_a_ray_that_misses_the_box_sees_the_background_alone():
 
 def test_the_snapshot_carries_the_planes_alone(capture, tmp_path):
     sizes = {}
-    for bg in ("white", "outer"):
+    for bg in ("white", "auto"):   # auto: a room without masks gets the background model
         out = tmp_path / f"{bg}.s3d"
         proc = run_cli("fit", str(capture / "transforms.json"), "-o", str(out), "--steps", "4", "--batch-rays", "256",
-                       "--plane-res", "16", "--plane-channels", "4", "--background", bg, "--up", "0,0,1")
+                       "--plane-res", "16", "--plane-channels", "4", "--background", bg, "--up", "0,0,1",
+                       "--report", str(tmp_path / f"{bg}.json"))
         assert proc.returncode == 0, proc.stderr
+        report = json.loads((tmp_path / f"{bg}.json").read_text())
+        if bg == "auto":
+            assert "background: outer (auto: no masks" in proc.stdout and report["background_mode"].startswith("outer")
+            assert "object's own pixels" in report["field_psnr_on"] and report["capture"]["box_from"].startswith("auto")
+        else:
+            assert "background_mode" not in report and "object's" not in report["field_psnr_on"]
         sizes[bg] = out.stat().st_size
         with np.load(out) as z:
             assert sorted(z.files) == ["box", "codes", "header"]
             assert z["codes"].shape == (3, 4, 16, 16)
         assert load_scene_file(out).codes.shape == (3, 4, 16, 16)
-    assert abs(sizes["outer"] - sizes["white"]) < 200   # the header's text differs (the box), never an array
+    assert abs(sizes["auto"] - sizes["white"]) < 200   # the header's text differs (the box), never an array
 
 
 def _share_outside(capture, background):
@@ -127,10 +134,32 @@ def test_the_ground_is_found_and_cut_away():
     assert box_from_density(alpha, box, looks_down=True)[1] is None
 
 
+def test_a_ray_that_leaves_through_the_ground_floor_ends_on_its_texture():
+    """With the floor texture (the box's floor is the ground found), a ray down through the empty box ends on the
+    texture at the point where it leaves, whatever lies beyond; a ray out of a side does not."""
+    from snapshot3d.train.field.decoder import load_decoder
+    frame = BoxFrame.from_box(np.array([[-1, -1, -1], [1, 1, 1]], np.float32))
+    bg = OuterField(8, init_density=-60.0, floor=4)
+    with torch.no_grad():
+        bg.floor.copy_(torch.tensor([[-3.0, -1.0, 1.0, 3.0]]).expand(1, 3, 4, 4))   # the colour varies with x
+        bg.env.fill_(-8.0)   # beyond: dark
+    o = torch.tensor([[-0.75, 0.0, 5.0], [0.75, 0.0, 5.0], [-5.0, 0.0, 0.5]])
+    d = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    empty = torch.full((3, 8, 4, 4), -1.0)
+    colour, acc, _ = render_with_background(empty, load_decoder(), frame, None, bg, o, d, 8)
+    floor = torch.sigmoid(torch.tensor([-3.0, 3.0]))   # texel centres at x = -0.75 and 0.75
+    assert float(acc.max()) < 1e-3
+    assert torch.allclose(colour[:2, 0], floor, atol=1e-3) and torch.allclose(colour[2], torch.zeros(3), atol=0.02)
+    colour_before = colour.clone()
+    bg.floor = None   # without the texture, the same downward rays end on the dark colour per direction
+    colour, _, _ = render_with_background(empty, load_decoder(), frame, None, bg, o, d, 8)
+    assert float(colour[:2].detach().max()) < 0.02 and not torch.allclose(colour, colour_before)
+
+
 def test_an_unknown_background_is_refused_in_one_line():
     from snapshot3d.errors import UserError
     from snapshot3d.train.field.config import FitConfig, check_fit_config
-    with pytest.raises(UserError, match="--background must be white or outer, not 'black'"):
+    with pytest.raises(UserError, match="--background must be auto, white or outer, not 'black'"):
         check_fit_config(FitConfig(background="black"))
     with pytest.raises(UserError, match="--background-samples >= 2"):
         check_fit_config(FitConfig(background="outer", background_samples=1))

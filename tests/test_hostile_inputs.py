@@ -210,18 +210,6 @@ def test_damaged_tiff_headers_print_nothing(tmp_path, capfd):
     assert errors > 50 and capfd.readouterr().err == ""
 
 
-def test_quiet_stderr_logs_what_c_code_wrote(caplog):
-    import logging
-    import os
-
-    from snapshot3d.images import quiet_stderr
-
-    with caplog.at_level(logging.INFO, logger="snapshot3d.imageio"):
-        with quiet_stderr(), quiet_stderr():
-            os.write(2, b"libpng warning: iCCP: known incorrect sRGB profile\n")
-    assert "known incorrect sRGB profile" in caplog.text
-
-
 # --- capture files (transforms.json) ---
 
 def _capture(tmp_path, transforms: dict, n=3):

@@ -53,6 +53,11 @@ def test_loads_through_the_capture_reader_with_the_lens_undone(capture):
         truth = cap["pinhole_alpha"][i] >= 0.5
         assert np.abs(_bbox(masked.alpha[i] >= 0.5) - _bbox(truth)).max() <= 1.0
         assert np.mean((masked.alpha[i] >= 0.5) != truth) < 0.01
+    # what fits are scored on: the same masked frames at the true poses (the written ones carry the pose noise)
+    true = load_scene(str(folder / "gt" / "transforms_true.json"), capture=KEEP)
+    np.testing.assert_allclose(true.c2w, cap["c2w_true"], atol=1e-5)
+    np.testing.assert_array_equal(true.alpha, masked.alpha)
+    assert np.abs(cap["c2w_true"] - cap["c2w_written"]).max() > 1e-3
 
 
 def test_gt_masks_hold_the_projected_mesh(capture):

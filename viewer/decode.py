@@ -134,15 +134,14 @@ def _views_psnr(scene: Scene, planes: np.ndarray, codec: str, info: dict) -> flo
     return views_psnr_expected(field_models(decoder=scene.decoder_version), planes, scene.box, scene.orbit, err)
 
 
-def _with_estimate(ds: "DecodedScene", timings: dict, channel=None) -> dict:
-    """ds.report with the quality estimate's views term filled in, and its time as timings["quality"];
-    `channel` (a callable -> the channel block, `_scene`'s) fills the channel block first when given."""
-    report = ds.report if channel is None else dict(ds.report, channel=channel())
+def _with_estimate(ds: "DecodedScene", timings: dict, channel, estimate) -> dict:
+    """ds.report with the channel block (`channel`: a callable -> it, `_scene`'s) and the quality estimate
+    with its views term (`estimate`: `_scene`'s callable views_psnr -> the estimate), built once; its time as
+    timings["quality"]."""
+    report = dict(ds.report, channel=channel())
     t0 = time.perf_counter()
-    q = report["quality_estimate"]
     views = _views_psnr(ds.scene, ds.planes, report["codec"], ds.codec_info)
-    report = dict(report, quality_estimate=quality_estimate(report["codec"], q["pilot_psnr_db"],
-                                                            q["plane_rmse_expected"], views))
+    report["quality_estimate"] = estimate(views)
     report["timings_ms"] = dict(timings, quality=round((time.perf_counter() - t0) * 1e3, 1))
     return validate.finite_tree(report, "report")
 
@@ -151,15 +150,16 @@ def decode_scene(path, cfg: RenderConfig = RenderConfig(), estimate: bool = True
     """Scan (or read the snapshot file), restore and bake; the report has the timings of these stages.
     `estimate`: also render the quality estimate's few small views (`viewer.quality_views`; `decode_photo`
     does that after the views, so that they come first)."""
-    ds, channel = _scene(path, cfg)
-    ds.report = _with_estimate(ds, ds.report["timings_ms"], channel) if estimate else \
-        validate.finite_tree(dict(ds.report, channel=channel()), "report")
+    ds, channel, quality = _scene(path, cfg)
+    ds.report = _with_estimate(ds, ds.report["timings_ms"], channel, quality) if estimate else \
+        validate.finite_tree(dict(ds.report, channel=channel(), quality_estimate=quality(None)), "report")
     return ds
 
 
 def _scene(path, cfg: RenderConfig):
-    """`decode_scene` without the channel block (None in the report) or the estimate's views term; and a
-    callable -> the channel block, for after the first view."""
+    """`decode_scene` without the channel block or the quality estimate (None in the report); a callable ->
+    the channel block, for after the first view; and a callable views_psnr (None: no views term) -> the
+    quality estimate, so that it is built once, with or without its views term."""
     t0 = time.perf_counter()
     res, snapshot, meta, source = read_input(path)
     t1 = time.perf_counter()
@@ -170,13 +170,13 @@ def _scene(path, cfg: RenderConfig):
                        cfg.bake)
     t3 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
-    pilot = None if res is None else res.pilot_psnr
+    pilot = None if res is None or res.pilot_psnr is None else round(float(res.pilot_psnr), 2)  # as the report shows
     report = {
         "source": source,
         "detected": True, "confidence": None if res is None else round(float(res.confidence), 3),
         "timings_ms": {"scan": ms(t0, t1), "restore": ms(t1, t2), "bake": ms(t2, t3)},
         "codec": meta.codec, "medium": CODEC_MEDIUM[meta.codec],
-        "quality_estimate": quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected")),
+        "quality_estimate": None,   # `estimate` below, after the views
         "channel": None,   # `channel` below, after the views
         "planes": list(meta.planes), "decoder": scene.decoder_version, "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
@@ -185,7 +185,11 @@ def _scene(path, cfg: RenderConfig):
     }
     px = None if res is None else px_per_pixel(res.corners)
     channel = lambda: channel_report(meta.codec, snapshot, meta.planes, codec_info, px)  # noqa: E731
-    return DecodedScene(scene, baked, planes, validate.finite_tree(report, "report"), snapshot, codec_info), channel
+
+    def estimate(views_psnr: float | None) -> dict:
+        return quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected"), views_psnr)
+    return (DecodedScene(scene, baked, planes, validate.finite_tree(report, "report"), snapshot, codec_info),
+            channel, estimate)
 
 
 def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORBIT_SIZE,
@@ -194,7 +198,7 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
     what the views need comes before them: the channel block and the estimate's views term follow them
     (`timings_ms["first_view"]` and `decode_ms` count from the call, neither includes those two)."""
     t0 = time.perf_counter()
-    ds, channel = _scene(path, cfg)   # the channel block and the estimate come after the views
+    ds, channel, quality = _scene(path, cfg)   # the channel block and the estimate come after the views
     t3 = time.perf_counter()
     c2w, intr = orbit_cameras(ds.scene.orbit, views, size)
     first = []
@@ -209,6 +213,6 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
     t4 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
     report = _with_estimate(ds, dict(ds.report["timings_ms"], render=ms(t3, t4),
-                                     first_view=ms(t0, first[0]) if first else None), channel)
+                                     first_view=ms(t0, first[0]) if first else None), channel, quality)
     report.update(views=views, size=size, decode_ms=ms(t0, t4))   # photo to views; the estimate comes after
     return Decoded(out, ds.scene, report, ds.baked)

@@ -7,17 +7,21 @@
 - uploads (POST `upload_path`): a Content-Length is required (411), within `max_bytes` (413), and a body
   longer than it is refused (400); checked before the body is read;
 - what escapes the routes: a client that went away is logged in one line; MemoryError answers 503; any
-  other exception is a bug in the server: a JSON 500, its traceback in the log, the connection kept."""
+  other exception is a bug in the server: a JSON 500, its traceback in the log, the connection kept.
+
+`BusyLog` keeps a storm of busy refusals (503, every decode slot taken) to one log line per 10 s."""
 from __future__ import annotations
 
 import asyncio
 import logging
+import threading
+import time
 
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
 from starlette.responses import JSONResponse
 
-__all__ = ["ApiError", "Guard", "error_response", "log_refusal", "one_line", "printable"]
+__all__ = ["ApiError", "BusyLog", "Guard", "error_response", "log_refusal", "one_line", "printable"]
 
 log = logging.getLogger("snapshot3d.serve")
 
@@ -50,6 +54,61 @@ def log_refusal(scope, status: int, message: str) -> None:
     """One log line per answer >= 400 (no traceback: the cause is the request)."""
     path = printable(scope.get("path", "?"))
     log.warning("%s %s -> %d %s", scope.get("method", "?"), path, status, one_line(message))
+
+
+class BusyLog:
+    """Busy refusals in at most one log line per `every_s` seconds: the first after a quiet spell as
+    `log_refusal` writes it; those after it counted and summed up in one line once `every_s` has passed since
+    the last line ("POST /v1/decode -> 503 refused 37 more uploads in 9.6 s: busy (2 decodes running)"),
+    written by a timer (on the event loop when one runs), so that no count waits for the next refusal.
+    Other refusals are not its business: they log one line each."""
+
+    def __init__(self, every_s: float = 10.0, clock=time.monotonic):
+        self.every_s, self.clock = every_s, clock
+        self._lock = threading.Lock()
+        self._last = None            # when the last line was written
+        self._held, self._first = 0, 0.0   # refusals not logged yet; when the first of them came
+        self._what = ("?", "?", 0)   # method, path, decodes running: for the summary line
+        self._timer = None
+
+    def refuse(self, scope, message: str, running: int) -> None:
+        now = self.clock()
+        with self._lock:
+            quiet = self._held == 0 and (self._last is None or now - self._last >= self.every_s)
+            if quiet:
+                self._last = now
+            else:
+                self._held += 1
+                if self._held == 1:
+                    self._first = now
+                self._what = (scope.get("method", "?"), printable(scope.get("path", "?")), running)
+                schedule = self._timer is None
+                if schedule:
+                    self._timer = "scheduling"
+        if quiet:
+            log_refusal(scope, 503, message)
+        elif schedule:
+            self._schedule(max(self._last + self.every_s - now, 0.0))
+
+    def _schedule(self, delay: float) -> None:
+        try:
+            self._timer = asyncio.get_running_loop().call_later(delay, self.flush)
+        except RuntimeError:   # no event loop in this thread
+            self._timer = threading.Timer(delay, self.flush)
+            self._timer.daemon = True
+            self._timer.start()
+
+    def flush(self) -> None:
+        """Write the summary line of the refusals held (none: nothing)."""
+        now = self.clock()
+        with self._lock:
+            held, first, (method, path, running) = self._held, self._first, self._what
+            self._held, self._timer = 0, None
+            if held:
+                self._last = now
+        if held:
+            log.warning("%s %s -> 503 refused %d more upload%s in %.1f s: busy (%d decodes running)", method, path,
+                        held, "" if held == 1 else "s", max(now - first, 0.0), running)
 
 
 class Guard:

@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import re
-import sys
 
 import h11
 from uvicorn.protocols.http.h11_impl import H11Protocol
@@ -118,18 +116,9 @@ def json_protocol(cfg: ServeConfig):
     return JsonH11Protocol
 
 
-def keep_log_stream() -> None:
-    """Point `sys.stderr` (where uvicorn's and the server's log lines go) at a copy of file descriptor 2 as
-    it is now. Decode threads send fd 2 to a sink while C code reads an image (`images.quiet_stderr`); a log
-    line written meanwhile through fd 2 would end up in that sink instead of the server's log."""
-    sys.stderr.flush()
-    sys.stderr = os.fdopen(os.dup(2), "w", buffering=1, encoding="utf-8", errors="backslashreplace")
-
-
 def run_server(app, cfg: ServeConfig) -> None:
     """Serve `app` on cfg.host:cfg.port until interrupted (uvicorn, h11, the JSON protocol above)."""
     import uvicorn
 
-    keep_log_stream()
     uvicorn.run(app, host=cfg.host, port=cfg.port, log_level="warning", http=json_protocol(cfg),
                 h11_max_incomplete_event_size=int(cfg.max_header_kb * 1024), timeout_keep_alive=5)

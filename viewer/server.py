@@ -6,7 +6,8 @@ Limits (`ServeConfig`): upload bytes (Content-Length checked before the body is 
 (read from the header before decoding; 413), concurrent decodes (a fixed number of slots; when all are
 busy, 503 with Retry-After: never an unbounded queue), a per-decode time limit (503; the late result is
 dropped, and its slot stays taken until it ends, so the bound holds), scenes kept (count and bytes,
-least recently used evicted), request bodies' read time (408, `viewer.serve_guard`). Everything a client
+least recently used evicted), request bodies' read time (408, `viewer.serve_guard`). Busy refusals log one
+line per 10 s, with their count (`serve_guard.BusyLog`); every other refusal one line each. Everything a client
 sends answers 2xx, 4xx or 503; a 500 is a bug in the server (JSON too, its traceback in the log). Routes,
 limits and the malformed-HTTP answers: docs/serve-api.md."""
 from __future__ import annotations
@@ -37,7 +38,7 @@ from snapshot3d.scanner.imageio_safe import image_size
 from .render import RenderConfig
 from .runtime import model_path
 from .serve_config import ServeConfig
-from .serve_guard import ApiError, Guard, error_response, log_refusal, printable
+from .serve_guard import ApiError, BusyLog, Guard, error_response, log_refusal, printable
 from .serving import BakedCache, mesh_file, orbit_view_png, render_png, write_scene
 from .store import SceneStore, StoreLimits
 
@@ -52,6 +53,10 @@ MODEL_ROUTES = ("restore", *(f"restore-{c}" for c in formats.FILE_CODECS), "rest
 RENDER_DISTANCE = (0.01, 50.0)  # /render's distance, in orbit radii
 
 
+class Busy(ApiError):
+    """503: every decode slot is taken (logged by `BusyLog`, not one line each)."""
+
+
 class Decoder:
     """Runs decodes on `max_decodes` threads, never more at once; `submit` refuses when all are busy."""
 
@@ -60,9 +65,8 @@ class Decoder:
         self.pool = ThreadPoolExecutor(cfg.max_decodes, thread_name_prefix="decode")
         self.slots = threading.BoundedSemaphore(cfg.max_decodes)
 
-    def busy(self) -> ApiError:
-        return ApiError(503, f"busy: {self.cfg.max_decodes} decodes are running; retry shortly",
-                        {"Retry-After": "2"})
+    def busy(self) -> Busy:
+        return Busy(503, f"busy: {self.cfg.max_decodes} decodes are running; retry shortly", {"Retry-After": "2"})
 
     def _job(self, upload: Path, dropped: threading.Event) -> tuple[str, dict]:
         tmp = self.store.staging()
@@ -112,6 +116,7 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
                               "download the scene, the mesh or the baked grid. Errors are JSON "
                               '{"error": "<one line>"}.')
     app.state.config, app.state.store, app.state.decoder = cfg, store, decoder
+    app.state.busy_log = busy_log = BusyLog()
     app.add_middleware(Guard, upload_path=DECODE_PATH, max_bytes=int(cfg.max_upload_mb * 1e6),
                        read_timeout_s=cfg.read_timeout_s, upload_timeout_s=cfg.upload_timeout_s)
 
@@ -121,6 +126,9 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
 
     @app.exception_handler(ApiError)
     async def _api_error(request, e: ApiError):
+        if isinstance(e, Busy):
+            busy_log.refuse(request.scope, e.message, cfg.max_decodes)
+            return error_response(e.status, e.message, e.headers)
         return _refuse(request, e.status, e.message, e.headers)
 
     @app.exception_handler(UserError)

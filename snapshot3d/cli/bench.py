@@ -78,7 +78,8 @@ def add_commands(sub) -> None:
              _run("snapshot3d.bench.capture_background", "bench_capture_background_command"))
     _out(bg)
     bg.add_argument("--meshes", default="spot", help="comma-separated built-in meshes")
-    bg.add_argument("--modes", default="white,outer,masked", help="comma-separated fits: white, outer, masked")
+    bg.add_argument("--modes", default="white,outer,masked", help="comma-separated fits: white, outer, masked, "
+                    "masked-refine, outer-refine (with --refine-poses), and the candidates of docs/capture.md")
     bg.add_argument("--size", type=int, default=128, help="capture width in pixels (height 3/4 of it)")
     bg.add_argument("--views", type=int, default=48, help="capture frames (every 8th held out)")
     bg.add_argument("--steps", type=int, default=300, help="fit steps")
@@ -86,6 +87,13 @@ def add_commands(sub) -> None:
     bg.add_argument("--plane-res", type=int, default=64, help="plane resolution")
     bg.add_argument("--plane-channels", type=int, default=8, help="plane channels")
     bg.add_argument("--seed", type=int, default=0, help="capture and fit seed")
+    bg.add_argument("--pose-noise-deg", type=float, default=0.0, help="rms rotation error of the capture's written "
+                    "poses (degrees; the fits are scored at the true poses)")
+    bg.add_argument("--pose-noise-frac", type=float, default=0.0, help="rms position error of the written poses, a "
+                    "fraction of the camera's distance")
+    bg.add_argument("--name", default="capture_background", help="results file name (without .json/.csv)")
+    bg.add_argument("--figure", action="store_true", help="also NAME_side_by_side_MESH.png of each mesh's outer "
+                    "fits: held-out input photos, the fit with its background model, the object alone")
     _quick(bg, size=48, views=8, steps=20)
 
     bv = add(bsub, "serve", "snapshot3d serve under concurrent uploads (answers, latency, memory, /render) and the "

@@ -23,7 +23,7 @@ from .field import composite, decode, sample_planes
 from .render import render_rays
 from .sampler import BoxFrame, ray_box
 
-__all__ = ["contract", "OuterField", "outer_query", "env_colour", "segment_samples", "render_with_background",
+__all__ = ["contract", "OuterField", "floor_colour", "outer_query", "env_colour", "segment_samples", "render_with_background",
            "distortion_loss", "opacity_entropy", "explained_by_background", "wall_points", "floor_points",
            "render_and_regularise"]
 
@@ -39,14 +39,27 @@ def contract(u: Tensor) -> Tensor:
 
 class OuterField(nn.Module):
     """Holds the outer grid (1, 4, G, G, G): density logit and RGB logits over contracted [-2, 2]^3 (the grid's
-    last axis follows x, as `grid_sample` reads it), and the colour per direction (1, 3, *ENV_SIZE) logits."""
+    last axis follows x, as `grid_sample` reads it), the colour per direction (1, 3, *ENV_SIZE) logits, and with
+    `floor` > 0 the ground's colour on the box's floor (1, 3, floor, floor) logits over its x (last axis), y."""
 
-    def __init__(self, res: int = 48, init_density: float = -4.0):
+    def __init__(self, res: int = 48, init_density: float = -4.0, floor: int = 0):
         super().__init__()
         grid = torch.zeros(1, 4, res, res, res)
         grid[:, 0] = init_density
         self.grid = nn.Parameter(grid)
         self.env = nn.Parameter(torch.zeros(1, 3, *ENV_SIZE))
+        self.floor = nn.Parameter(torch.zeros(1, 3, floor, floor)) if floor else None
+
+
+def floor_colour(floor: Tensor, frame: BoxFrame, o: Tensor, d: Tensor, t_out: Tensor,
+                 hit: Tensor) -> tuple[Tensor, Tensor]:
+    """Where q-space rays (N, 3) leave the box (at t_out (N,), `hit` (N,) bool) through its floor, the ground's
+    colour there: -> (N,) bool, RGB (N, 3) in [0, 1] from `floor` (1, 3, F, F) logits (bilinear)."""
+    u = frame.q_to_unit(o + t_out[:, None] * d)
+    down = hit & (d[:, 2] < 0) & (u[:, 2] <= -1 + 1e-3)
+    g = u[:, :2].clamp(-1, 1).view(1, 1, -1, 2)
+    return down, torch.sigmoid(F.grid_sample(floor, g, mode="bilinear", padding_mode="border",
+                                             align_corners=False)[0, :, 0].t())
 
 
 def outer_query(grid: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
@@ -99,6 +112,9 @@ def render_with_background(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor
     sigma, rgb = outer_query(bg.grid, frame.q_to_unit(pts.reshape(-1, 3)))
     sigma, rgb = sigma.view(t.shape), rgb.view(*t.shape, 3)
     after, _, _ = composite(sigma[:, samples:], rgb[:, samples:], da, env_colour(bg.env, d))
+    if bg.floor is not None:   # the box's floor is the ground: a ray that leaves through it ends there
+        down, ground = floor_colour(bg.floor, frame, o, d, t_out, hit)
+        after = torch.where(down[:, None], ground, after)
     box, acc, n_box, *weights = render_rays(planes, decoder, frame, occ, o, d, jitter=jitter, generator=generator,
                                             min_transmittance=min_transmittance, background=after, with_weights=extras)
     colour, _, _ = composite(sigma[:, :samples], rgb[:, :samples], db, box)

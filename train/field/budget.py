@@ -35,16 +35,17 @@ from .fit import fit, hull_grid
 __all__ = ["fit_ladder", "choose_rung", "codec_psnr", "expected_e2e", "codec_share", "ladder_for", "print_channel",
            "predicted_e2e", "CURVES_FILE", "PREDICT_HOSTS"]
 
-def predicted_e2e(planes: np.ndarray, decoder, posed: PosedImages, channel, hosts=PREDICT_HOSTS, seed: int = 0) -> float:
+def predicted_e2e(planes: np.ndarray, decoder, posed: PosedImages, channel, hosts=PREDICT_HOSTS, seed: int = 0,
+                  **scoring) -> float:
     """The e2e_psnr (held-out views) expected of planes (3, C, R, R) printed and captured: the median over
-    `hosts` of one draw of the channel model each."""
+    `hosts` of one draw of the channel model each. `scoring`: `evaluate_planes`'s background, samples, masks."""
     from snapshot3d.codecs.print_channel import predicted_planes
     from snapshot3d.scanner.backgrounds import load_host
     from snapshot3d.scene import quantize_planes
 
     rng = np.random.default_rng(seed)
     scores = [evaluate_planes(dequantize_planes(quantize_planes(predicted_planes(load_host(h), planes, channel, rng))),
-                              decoder, posed)["field_psnr"] for h in hosts]
+                              decoder, posed, **scoring)["field_psnr"] for h in hosts]
     return float(np.median(scores))
 
 
@@ -99,7 +100,9 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
         seconds = time.perf_counter() - t0
         if big is None:
             big = torch.from_numpy(dequantize_planes(res_.codes))
-        ev = evaluate_planes(dequantize_planes(res_.codes), decoder, posed)
+        scoring = {"background": res_.state.background, "samples": cfg.background_samples}
+        ev = evaluate_planes(dequantize_planes(res_.codes), decoder, posed, **scoring)
+        scoring["masks"] = ev.get("masks")   # a print's restored planes are scored on the field's own object pixels
         kb = Scene(codes=res_.codes, box=posed.box, orbit=Orbit(radius=1.0)).scene_kb
         rungs.append({"plane_res": res, "plane_channels": ch, "scene_kb": round(kb, 2),
                       "field_psnr": round(ev["field_psnr"], 3), "field_ssim": round(ev["field_ssim"], 4),
@@ -108,7 +111,7 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
             c = codec_psnr(medium, int(res_.codes.size))
             rungs[-1].update(codec_psnr=round(c, 3), e2e_expected=round(expected_e2e(ev["field_psnr"], c), 3))
             if channel is not None:  # the scene's own planes through the print channel's model
-                e2e = predicted_e2e(dequantize_planes(res_.codes), decoder, posed, channel)
+                e2e = predicted_e2e(dequantize_planes(res_.codes), decoder, posed, channel, **scoring)
                 rungs[-1].update(codec_psnr_curve=rungs[-1]["codec_psnr"], e2e_expected=round(e2e, 3),
                                  codec_psnr=round(codec_share(ev["field_psnr"], e2e), 3))
         log(f"ladder R={res} C={ch}: {kb:.1f} kB, field_psnr {ev['field_psnr']:.2f} dB"

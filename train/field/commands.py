@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -65,9 +66,20 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
 
     posed = load_scene(spec, downscale=downscale, capture=capture, size=size) if spec.startswith("builtin:") else \
         load_scene(spec, downscale=downscale, capture=capture)
+    chose = None
+    if cfg.background == "auto":   # a room round the object, or an object on white: read from the frames
+        from snapshot3d.capture import choose_background, with_overlap_box
+        mode, why = choose_background(posed)
+        cfg, chose = replace(cfg, background=mode), f"{mode} ({why})"
+        if mode == "outer" and (capture is None or capture.box is None):
+            posed = with_overlap_box(posed)
+    if cfg.refine_poses == "auto":   # poses from a solver or an app are a little off; builtin and Blender's are exact
+        cfg = replace(cfg, refine_poses="on" if posed.info.get("layout") in ("nerfstudio", "colmap") else "off")
     read = posed.info.get("capture")
     if read and not quiet:
         print(describe(read))
+    if chose and not quiet and not spec.startswith("builtin:"):
+        print(f"background: {chose}")
     from ..device import resolve_device
     from .budget import fit_ladder
     from .decoder import load_decoder
@@ -79,7 +91,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     t0 = time.perf_counter()
     log = (lambda *_: None) if quiet else print
     bars = None if quiet else _bar
-    report = {}
+    report = {"background_mode": chose} if chose and not spec.startswith("builtin:") else {}
     if cfg.background == "outer" and read and str(read.get("box_from", "")).startswith("auto"):
         posed, report["background"] = _tightened(posed, decoder, cfg, device, quiet)
     if budget == "auto":
@@ -96,9 +108,13 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         res = fit(posed, decoder, cfg, checkpoint=checkpoint, progress=bars("fit", cfg.steps) if bars else None,
                   device=device)
         codes, steps = res.codes, cfg.steps
-        ev = evaluate_planes(dequantize_planes(codes), decoder, posed)
+        ev = evaluate_planes(dequantize_planes(codes), decoder, posed, background=res.state.background,
+                             samples=cfg.background_samples)
         report["_throughput"] = {"rays_per_s": res.state.rays / max(res.seconds, 1e-9),
                                  "samples_per_s": res.state.samples / max(res.seconds, 1e-9)}
+        if res.state.poses is not None:
+            from .pose_refine import pose_summary
+            report["pose_refinement"] = pose_summary(res.state.poses.params, res.state.frame.scale)
     else:
         raise UserError(f"--budget must be 'fixed' or 'auto', not {budget!r}")
     seconds = time.perf_counter() - t0
@@ -111,6 +127,9 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
               "plane_res": scene.resolution, "plane_channels": scene.channels, **report}
     if read and not spec.startswith("builtin:"):   # a builtin scene's split and box are fixed by its name and size
         report["field_psnr_on"] = "training frames (--holdout 0)" if read["holdout"] == 0 else "held-out frames"
+        if cfg.background == "outer":
+            report["field_psnr_on"] += (", on the object's own pixels (the planes' opacity >= 0.5), the background "
+                                        "model behind them")
         report["capture"] = read
     return scene, report, ev["renders"]
 
@@ -118,7 +137,6 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
 def _tightened(posed, decoder, cfg, device, quiet: bool):
     """`posed` in the automatic box tightened from a short fit's density (train/field/box_tighten.py), its
     capture account updated; and what the tightening found."""
-    from dataclasses import replace
 
     from .box_tighten import tighten_box
     box, info = tighten_box(posed, decoder, cfg, device)
@@ -131,7 +149,7 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
         lo, hi = (", ".join(f"{float(x):.3g}" for x in corner) for corner in box)
         print(f"box ({lo})..({hi}) (tightened from {info['prefit_steps']} steps' density{ground}, "
               f"{info['prefit_seconds']:.0f} s)")
-    return replace(posed, box=box), info
+    return replace(posed, box=box, info={**posed.info, "ground_z": info["ground_z"]}), info
 
 
 def fit_command(args) -> int:

@@ -41,16 +41,22 @@ class FitConfig:
     decoder: str = config_field(formats.DECODER_VERSION, "shared decoder version to fit for: "
                                 + ", ".join(formats.DECODERS) + " (docs/fitting.md)")
     checkpoint_every: int = config_field(250, "steps between checkpoints")
-    background: str = config_field("white", "what the rays end on: white (the snapshot's background; captures "
+    background: str = config_field("auto", "what the rays end on: white (the snapshot's background; captures "
                                    "with masks or on white), or outer: a coarse contracted field outside the box and "
                                    "a colour per direction, fitted with the planes and never carried in the snapshot "
                                    "(captures of a room without masks; the box is then found from the cameras' "
-                                   "overlap and the density, train/field/background.py)")
+                                   "overlap and the density, train/field/background.py); auto: outer for a "
+                                   "capture without masks whose frames' borders are not white, else white (a "
+                                   "fit's core treats auto as white)")
     background_res: int = config_field(48, "with --background outer: cells per axis of the outer field's grid")
     background_samples: int = config_field(24, "with --background outer: outer-field samples per ray before the "
                                            "box and as many after it")
     background_lr: float = config_field(0.05, "with --background outer: the outer field's learning rate (decayed as "
                                         "the planes')")
+    ground_texture: int = config_field(0, "with --background outer and the ground found under the object (the "
+                                       "box's floor cut there): texels per side of a colour texture on that floor, "
+                                       "the ground's look where it meets the object (part of the background model, "
+                                       "never carried; 0: off, as measured in docs/capture.md)")
     distortion_weight: float = config_field(0.0, "with --background outer: weight of mip-NeRF 360's distortion loss "
                                             "on the box samples' weights (floaters spread along a ray cost)")
     opacity_weight: float = config_field(0.0, "with --background outer: weight of each ray's opacity in the box "
@@ -63,6 +69,14 @@ class FitConfig:
                                        "band where nothing stands above it (the ground left over the ground cut)")
     wall_margin: float = config_field(0.15, "with --background outer: depth of the walls' and the floor's bands, a "
                                       "fraction of the box's half-size (at most 0.25)")
+    refine_poses: str = config_field("auto", "learn a small correction of each training view's pose with the "
+                                     "planes (a rotation about the camera and a shift, train/field/pose_refine.py): "
+                                     "on, off, or auto: on for nerfstudio and COLMAP captures (poses from a solver "
+                                     "or an app), off for builtin and Blender scenes (exact poses; a fit's core "
+                                     "treats auto as off)")
+    pose_lr: float = config_field(1e-3, "with --refine-poses: the corrections' learning rate (decayed as the planes')")
+    pose_start: float = config_field(0.1, "with --refine-poses: fraction of the steps before the corrections move (the "
+                                     "planes first take a rough shape)")
     tighten_sides: bool = config_field(True, "with --background outer and --box auto: the short pre-fit also cuts "
                                        "the box's sides and top to where its density lies, with a margin "
                                        "(train/field/box_tighten.py; fewer floaters, bench capture-background)")
@@ -99,13 +113,19 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
     if not (cfg.lr > 0 and cfg.lr_final > 0):
         problems.append("--lr and --lr-final must be > 0")
     if not (0 <= cfg.qat_fraction <= 1 and 0 <= cfg.channel_fraction <= 1 and 0 <= cfg.fg_fraction <= 1
-            and 0 <= cfg.min_transmittance < 1 and cfg.channel_noise >= 0):
+            and 0 <= cfg.min_transmittance < 1 and cfg.channel_noise >= 0 and 0 <= cfg.pose_start < 1):
         problems.append("--qat-fraction, --channel-fraction and --fg-fraction must be in [0, 1], "
-                        "--min-transmittance in [0, 1), --channel-noise >= 0")
-    if cfg.background not in ("white", "outer"):
-        problems.append(f"--background must be white or outer, not {cfg.background!r}")
-    if cfg.background_res < 4 or cfg.background_samples < 2 or not cfg.background_lr > 0:
-        problems.append("--background-res must be >= 4, --background-samples >= 2, --background-lr > 0")
+                        "--min-transmittance and --pose-start in [0, 1), --channel-noise >= 0")
+    if cfg.background not in ("auto", "white", "outer"):
+        problems.append(f"--background must be auto, white or outer, not {cfg.background!r}")
+    if cfg.refine_poses not in ("auto", "on", "off"):
+        problems.append(f"--refine-poses must be auto, on or off, not {cfg.refine_poses!r}")
+    if not cfg.pose_lr > 0:
+        problems.append("--pose-lr must be > 0")
+    if cfg.background_res < 4 or cfg.background_samples < 2 or not cfg.background_lr > 0 or \
+            not 0 <= cfg.ground_texture <= 1024:
+        problems.append("--background-res must be >= 4, --background-samples >= 2, --background-lr > 0, "
+                        "--ground-texture in 0..1024")
     if min(cfg.distortion_weight, cfg.opacity_weight, cfg.wall_weight, cfg.floor_weight) < 0 or \
             not 0 < cfg.wall_margin <= 0.25:
         problems.append("--distortion-weight, --opacity-weight, --wall-weight and --floor-weight must be >= 0, "

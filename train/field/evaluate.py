@@ -1,4 +1,9 @@
-"""Held-out measures of a fitted scene (DESIGN section 3): `field_psnr`, `field_ssim`."""
+"""Held-out measures of a fitted scene (DESIGN section 3): `field_psnr`, `field_ssim`.
+
+A capture fitted with the background model (fit --background outer) has a room in its photos that the planes do
+not hold. Its views are then rendered with that model behind the planes, and scored on the object's own pixels:
+where the fitted planes' opacity is at least a half (`OBJECT_OPACITY`), the only object mask such a capture has.
+The restored planes of a print (`budget.predicted_e2e`) are scored on the same pixels, given as `masks`."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,17 +12,50 @@ import torch
 from snapshot3d.metrics import psnr, ssim
 from snapshot3d.posed import PosedImages
 
-from .render import render_views
+from .rays import view_rays
+from .render import occupancy_from_planes, render_views
+from .sampler import BoxFrame
 
-__all__ = ["evaluate_planes"]
+__all__ = ["evaluate_planes", "render_with_model", "OBJECT_OPACITY"]
+
+OBJECT_OPACITY = 0.5
 
 
-def evaluate_planes(planes: np.ndarray, decoder, posed: PosedImages, views=None) -> dict:
-    """Render the test views (default `posed.test`) from planes (3, C, R, R) float32; mean PSNR/SSIM."""
+@torch.no_grad()
+def render_with_model(planes: torch.Tensor, decoder, background, samples: int, posed: PosedImages, views,
+                      chunk: int = 8192) -> tuple[np.ndarray, np.ndarray]:
+    """Views `views` of `posed` with the planes (3, C, R, R) in front of `background` (a `background.OuterField`)
+    -> RGB (V, H, W, 3) float32 in [0, 1], the planes' opacity (V, H, W) float32."""
+    from .background import render_with_background
+    frame = BoxFrame.from_box(posed.box, planes.device)
+    occ = occupancy_from_planes(planes, decoder, frame)
+    rgb = np.empty((len(views), posed.height, posed.width, 3), np.float32)
+    acc = np.empty((len(views), posed.height, posed.width), np.float32)
+    for k, i in enumerate(views):
+        o, d = view_rays(posed.c2w[i], posed.intrinsics[i], posed.width, posed.height, frame)
+        out = [render_with_background(planes, decoder, frame, occ, background, oc, dc, samples)[:2]
+               for oc, dc in zip(o.split(chunk), d.split(chunk))]
+        rgb[k] = torch.cat([c for c, _ in out]).clamp(0, 1).reshape(posed.height, posed.width, 3).cpu().numpy()
+        acc[k] = torch.cat([a for _, a in out]).reshape(posed.height, posed.width).cpu().numpy()
+    return rgb, acc
+
+
+def evaluate_planes(planes: np.ndarray, decoder, posed: PosedImages, views=None, background=None, samples: int = 24,
+                    masks: np.ndarray | None = None) -> dict:
+    """Render the test views (default `posed.test`) from planes (3, C, R, R) float32; mean PSNR/SSIM. With
+    `background` (an OuterField and its `samples` per segment): rendered in front of it and scored on the pixels
+    of `masks` (V, H, W) bool, by default where these planes' opacity >= OBJECT_OPACITY (returned as "masks")."""
     views = posed.test if views is None else views
     device = next(decoder.parameters()).device
-    pred = render_views(torch.from_numpy(planes).to(device), decoder, posed.box, posed.c2w[views], posed.intrinsics[views],
-                        posed.width, posed.height)
+    p = torch.from_numpy(planes).to(device)
     gt = posed.images[views]
-    return {"field_psnr": float(np.mean([psnr(p, g) for p, g in zip(pred, gt)])),
-            "field_ssim": float(np.mean([ssim(p, g) for p, g in zip(pred, gt)])), "renders": pred}
+    if background is None:
+        pred = render_views(p, decoder, posed.box, posed.c2w[views], posed.intrinsics[views], posed.width, posed.height)
+        return {"field_psnr": float(np.mean([psnr(a, g) for a, g in zip(pred, gt)])),
+                "field_ssim": float(np.mean([ssim(a, g) for a, g in zip(pred, gt)])), "renders": pred}
+    pred, acc = render_with_model(p, decoder, background, samples, posed, views)
+    masks = acc >= OBJECT_OPACITY if masks is None else masks
+    scores = [-10 * np.log10(max(float(((a - g) ** 2)[m].mean()), 1e-10)) if m.any() else 0.0
+              for a, g, m in zip(pred, gt, masks)]
+    return {"field_psnr": float(np.mean(scores)), "field_ssim": float(np.mean([ssim(a, g) for a, g in zip(pred, gt)])),
+            "renders": pred, "masks": masks}

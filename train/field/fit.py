@@ -48,6 +48,9 @@ class FitState:
     background: torch.nn.Module | None = None
     """`background.OuterField` with cfg.background "outer" (never written to the snapshot), else None"""
     bg_opt: torch.optim.Optimizer | None = None
+    poses: torch.nn.Module | None = None
+    """`pose_refine.PoseRefine` of the training views with cfg.refine_poses (never written to the snapshot), else None"""
+    pose_opt: torch.optim.Optimizer | None = None
 
 
 @dataclass
@@ -80,10 +83,17 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
     bg = bg_opt = None
     if cfg.background == "outer":
         from .background import OuterField
-        bg = OuterField(cfg.background_res).to(device)
+        ground = posed.info.get("ground_z") is not None   # the box's floor is the ground (commands._tightened)
+        bg = OuterField(cfg.background_res, floor=cfg.ground_texture if ground else 0).to(device)
         bg_opt = torch.optim.Adam(bg.parameters(), lr=cfg.background_lr)
+    poses = pose_opt = None
+    if cfg.refine_poses == "on":
+        from .pose_refine import PoseRefine
+        poses = PoseRefine(len(posed.train)).to(device)
+        pose_opt = torch.optim.Adam(poses.parameters(), lr=cfg.pose_lr)
     return FitState(planes, occ, frame, make_rays(posed, posed.train, frame).to(device), opt,
-                    channel=new_state_channel(cfg, device), background=bg, bg_opt=bg_opt)
+                    channel=new_state_channel(cfg, device), background=bg, bg_opt=bg_opt, poses=poses,
+                    pose_opt=pose_opt)
 
 
 def new_state_channel(cfg: FitConfig, device=None) -> tuple | None:
@@ -130,7 +140,12 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     if st.bg_opt is not None:
         for g in st.bg_opt.param_groups:
             g["lr"] = lr_at(cfg, st.step) * cfg.background_lr / cfg.lr
-    o, d, target = st.bank.batch(cfg.batch_rays, cfg.fg_fraction, gen)
+    o, d, target, view = st.bank.batch(cfg.batch_rays, cfg.fg_fraction, gen)
+    move_poses = st.poses is not None and st.step >= cfg.steps * cfg.pose_start
+    if st.poses is not None:
+        for g in st.pose_opt.param_groups:
+            g["lr"] = lr_at(cfg, st.step) * cfg.pose_lr / cfg.lr
+        o, d = st.poses(view, o, d)
     planes = st.planes.planes
     if st.channel is not None and st.step >= cfg.steps * (1 - cfg.channel_fraction):
         dct, gain, noise = st.channel   # what a print restores
@@ -160,12 +175,16 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     st.opt.zero_grad(set_to_none=True)
     if extra_params_opt is not None:
         extra_params_opt.zero_grad(set_to_none=True)
-    if st.bg_opt is not None:
-        st.bg_opt.zero_grad(set_to_none=True)
+    for extra in (st.bg_opt, st.pose_opt):
+        if extra is not None:
+            extra.zero_grad(set_to_none=True)
     loss.backward()
     st.opt.step()
     if st.bg_opt is not None:
         st.bg_opt.step()
+    if move_poses:
+        st.pose_opt.step()
+        st.poses.hold_gauge()
     if extra_params_opt is not None:
         extra_params_opt.step()
     st.planes.clamp_()
@@ -183,7 +202,9 @@ def _save_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, s
                 "opt": st.opt.state_dict(), "gen": gen.get_state(), "seconds": st.train_seconds,
                 "rays": st.rays, "samples": st.samples,
                 **({"background": st.background.state_dict(), "bg_opt": st.bg_opt.state_dict()}
-                   if st.background is not None else {})}, tmp)
+                   if st.background is not None else {}),
+                **({"poses": st.poses.state_dict(), "pose_opt": st.pose_opt.state_dict()} if st.poses is not None else {})},
+               tmp)
     tmp.replace(path)
 
 
@@ -198,6 +219,8 @@ def _load_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, s
     gen.set_state(ck["gen"])
     if st.background is not None:
         st.background.load_state_dict(ck["background"]), st.bg_opt.load_state_dict(ck["bg_opt"])
+    if st.poses is not None:
+        st.poses.load_state_dict(ck["poses"]), st.pose_opt.load_state_dict(ck["pose_opt"])
     st.step, st.train_seconds, st.rays, st.samples = ck["step"], ck["seconds"], ck["rays"], ck["samples"]
     return True
 

@@ -64,22 +64,30 @@ def ray_box(o: Tensor, d: Tensor, half: Tensor) -> tuple[Tensor, Tensor]:
 @dataclass
 class Samples:
     """Kept samples of a ray batch: `ray`, `step` (M,) indices into the dense (N, S) grid, positions (M, 3)
-    in plane coordinates [-1, 1]; S the dense width."""
+    in plane coordinates [-1, 1]; S the dense width; offset (N,) each ray's sample offset in steps (jitter)."""
 
     ray: Tensor
     idx: Tensor
     unit: Tensor
     n_rays: int
     width: int
+    offset: Tensor | None = None
 
 
 def march(o: Tensor, d: Tensor, frame: BoxFrame, occ: Tensor | None, jitter: bool,
           generator: torch.Generator | None = None) -> Samples:
     """Uniform samples along q-space rays inside the box, kept where `occ` (G, G, G) bool [ix, iy, iz]
     over plane coordinates is set (all kept when occ is None)."""
+    if o.requires_grad or d.requires_grad:   # rays being refined (fit --refine-poses): grad on the kept samples only
+        with torch.no_grad():
+            s = march(o.detach(), d.detach(), frame, occ, jitter, generator)
+        near = ray_box(o, d, frame.half_unit)[0]
+        t = near[s.ray] + (s.idx.to(o.dtype) + s.offset[s.ray]) * frame.step
+        unit = frame.q_to_unit(o[s.ray] + t[:, None] * d[s.ray]).clamp(-1.0, 1.0)
+        return Samples(ray=s.ray, idx=s.idx, unit=unit, n_rays=s.n_rays, width=s.width, offset=s.offset)
     step = frame.step
     near, far = ray_box(o, d, frame.half_unit)
-    width = max(1, int(math.ceil(float((far - near).clamp(min=0).max()) / step)))
+    width = max(1, int(math.ceil(float((far - near).detach().clamp(min=0).max()) / step)))
     k = torch.arange(width, dtype=o.dtype, device=o.device)
     off = torch.rand(o.shape[0], 1, generator=generator).to(o.device) if jitter else \
         torch.full((o.shape[0], 1), 0.5, device=o.device)
@@ -93,4 +101,4 @@ def march(o: Tensor, d: Tensor, frame: BoxFrame, occ: Tensor | None, jitter: boo
         cell = ((unit + 1.0) * 0.5 * g).long().clamp(0, g - 1)
         keep = occ[cell[:, 0], cell[:, 1], cell[:, 2]]
         ray, idx, unit = ray[keep], idx[keep], unit[keep]
-    return Samples(ray=ray, idx=idx, unit=unit, n_rays=o.shape[0], width=width)
+    return Samples(ray=ray, idx=idx, unit=unit, n_rays=o.shape[0], width=width, offset=off[:, 0])
