@@ -42,6 +42,7 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-sides-walls": ("transforms.json", "outer", "auto", _SIDES_WALLS),
          "outer-sides-walls-floor": ("transforms.json", "outer", "auto", {**_SIDES_WALLS, "floor_weight": 1.0}),
          "outer-ground": ("transforms.json", "outer", "auto", {"ground_texture": 128}),
+         "outer-ground-low": ("transforms.json", "outer", "auto", {"ground_texture": 128, "ground_depth": 0.05}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"})}

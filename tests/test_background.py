@@ -150,6 +150,14 @@ def test_a_ray_that_leaves_through_the_ground_floor_ends_on_its_texture():
     floor = torch.sigmoid(torch.tensor([-3.0, 3.0]))   # texel centres at x = -0.75 and 0.75
     assert float(acc.max()) < 1e-3
     assert torch.allclose(colour[:2, 0], floor, atol=1e-3) and torch.allclose(colour[2], torch.zeros(3), atol=0.02)
+    # a slanted ray meets a plane `depth` below the floor further along: x = 0.25 at the floor, 0.75 at depth 1
+    from snapshot3d.train.field.background import floor_colour
+    o1, d1 = torch.tensor([[-2.25, 0.0, 4.0]]), torch.nn.functional.normalize(torch.tensor([[0.5, 0.0, -1.0]]), dim=1)
+    t_out = torch.tensor([5.0 * float(1 / d1[0, 2].abs())])
+    for depth, logit in ((0.0, 1.0), (1.0, 3.0)):   # the texel centres at x = 0.25 and 0.75
+        down, c = floor_colour(bg.floor, frame, o1, d1, t_out, torch.tensor([True]), depth)
+        want = float(torch.sigmoid(torch.tensor(logit)))
+        assert bool(down[0]) and abs(float(c[0, 0].detach()) - want) < 1e-3, (depth, float(c[0, 0].detach()), want)
     colour_before = colour.clone()
     bg.floor = None   # without the texture, the same downward rays end on the dark colour per direction
     colour, _, _ = render_with_background(empty, load_decoder(), frame, None, bg, o, d, 8)

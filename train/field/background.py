@@ -40,23 +40,27 @@ def contract(u: Tensor) -> Tensor:
 class OuterField(nn.Module):
     """Holds the outer grid (1, 4, G, G, G): density logit and RGB logits over contracted [-2, 2]^3 (the grid's
     last axis follows x, as `grid_sample` reads it), the colour per direction (1, 3, *ENV_SIZE) logits, and with
-    `floor` > 0 the ground's colour on the box's floor (1, 3, floor, floor) logits over its x (last axis), y."""
+    `floor` > 0 the ground's colour (1, 3, floor, floor) logits over the box's floor x (last axis), y, on a plane
+    `floor_depth` q units below it."""
 
-    def __init__(self, res: int = 48, init_density: float = -4.0, floor: int = 0):
+    def __init__(self, res: int = 48, init_density: float = -4.0, floor: int = 0, floor_depth: float = 0.0):
         super().__init__()
         grid = torch.zeros(1, 4, res, res, res)
         grid[:, 0] = init_density
         self.grid = nn.Parameter(grid)
         self.env = nn.Parameter(torch.zeros(1, 3, *ENV_SIZE))
         self.floor = nn.Parameter(torch.zeros(1, 3, floor, floor)) if floor else None
+        self.floor_depth = floor_depth
 
 
 def floor_colour(floor: Tensor, frame: BoxFrame, o: Tensor, d: Tensor, t_out: Tensor,
-                 hit: Tensor) -> tuple[Tensor, Tensor]:
+                 hit: Tensor, depth: float = 0.0) -> tuple[Tensor, Tensor]:
     """Where q-space rays (N, 3) leave the box (at t_out (N,), `hit` (N,) bool) through its floor, the ground's
-    colour there: -> (N,) bool, RGB (N, 3) in [0, 1] from `floor` (1, 3, F, F) logits (bilinear)."""
-    u = frame.q_to_unit(o + t_out[:, None] * d)
-    down = hit & (d[:, 2] < 0) & (u[:, 2] <= -1 + 1e-3)
+    colour on the plane `depth` (q units) below that floor, where they meet it: -> (N,) bool, RGB (N, 3) in
+    [0, 1] from `floor` (1, 3, F, F) logits (bilinear, over the floor's x, y)."""
+    exit_ = o + t_out[:, None] * d
+    down = hit & (d[:, 2] < 0) & (frame.q_to_unit(exit_)[:, 2] <= -1 + 1e-3)
+    u = frame.q_to_unit(exit_ + d * (depth / (-d[:, 2]).clamp(min=1e-3))[:, None])
     g = u[:, :2].clamp(-1, 1).view(1, 1, -1, 2)
     return down, torch.sigmoid(F.grid_sample(floor, g, mode="bilinear", padding_mode="border",
                                              align_corners=False)[0, :, 0].t())
@@ -113,7 +117,7 @@ def render_with_background(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor
     sigma, rgb = sigma.view(t.shape), rgb.view(*t.shape, 3)
     after, _, _ = composite(sigma[:, samples:], rgb[:, samples:], da, env_colour(bg.env, d))
     if bg.floor is not None:   # the box's floor is the ground: a ray that leaves through it ends there
-        down, ground = floor_colour(bg.floor, frame, o, d, t_out, hit)
+        down, ground = floor_colour(bg.floor, frame, o, d, t_out, hit, bg.floor_depth)
         after = torch.where(down[:, None], ground, after)
     box, acc, n_box, *weights = render_rays(planes, decoder, frame, occ, o, d, jitter=jitter, generator=generator,
                                             min_transmittance=min_transmittance, background=after, with_weights=extras)

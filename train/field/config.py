@@ -57,6 +57,9 @@ class FitConfig:
                                        "box's floor cut there): texels per side of a colour texture on that floor, "
                                        "the ground's look where it meets the object (part of the background model, "
                                        "never carried; 0: off, as measured in docs/capture.md)")
+    ground_depth: float = config_field(0.0, "with --ground-texture: how far below the box's floor the texture's plane "
+                                       "lies (world units; the ground is found to a pre-fit cell, and the floor is cut "
+                                       "at that cell's top)")
     distortion_weight: float = config_field(0.0, "with --background outer: weight of mip-NeRF 360's distortion loss "
                                             "on the box samples' weights (floaters spread along a ray cost)")
     opacity_weight: float = config_field(0.0, "with --background outer: weight of each ray's opacity in the box "
@@ -123,9 +126,9 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
     if not cfg.pose_lr > 0:
         problems.append("--pose-lr must be > 0")
     if cfg.background_res < 4 or cfg.background_samples < 2 or not cfg.background_lr > 0 or \
-            not 0 <= cfg.ground_texture <= 1024:
+            not 0 <= cfg.ground_texture <= 1024 or not cfg.ground_depth >= 0:
         problems.append("--background-res must be >= 4, --background-samples >= 2, --background-lr > 0, "
-                        "--ground-texture in 0..1024")
+                        "--ground-texture in 0..1024, --ground-depth >= 0")
     if min(cfg.distortion_weight, cfg.opacity_weight, cfg.wall_weight, cfg.floor_weight) < 0 or \
             not 0 < cfg.wall_margin <= 0.25:
         problems.append("--distortion-weight, --opacity-weight, --wall-weight and --floor-weight must be >= 0, "

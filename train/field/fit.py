@@ -84,7 +84,8 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
     if cfg.background == "outer":
         from .background import OuterField
         ground = posed.info.get("ground_z") is not None   # the box's floor is the ground (commands._tightened)
-        bg = OuterField(cfg.background_res, floor=cfg.ground_texture if ground else 0).to(device)
+        bg = OuterField(cfg.background_res, floor=cfg.ground_texture if ground else 0,
+                        floor_depth=cfg.ground_depth / frame.scale).to(device)
         bg_opt = torch.optim.Adam(bg.parameters(), lr=cfg.background_lr)
     poses = pose_opt = None
     if cfg.refine_poses == "on":
