@@ -71,10 +71,11 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = No
     truth = load_scene(str(true_poses if true_poses.is_file() else cap / "gt/transforms_masked.json"),
                        capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
     true_box = json.loads((cap / "gt/truth.json").read_text())["box"]
-    score = score_object(torch.from_numpy(scene.planes()), load_decoder(cfg.decoder), scene.box, truth, true_box)
+    decoder = load_decoder(cfg.decoder)
+    score = score_object(torch.from_numpy(scene.planes()), decoder, scene.box, truth, true_box)
     if figure is not None and renders is not None:
         photos = load_scene(str(cap / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
-        _side_by_side(figure, scene, truth, photos.images, renders, load_decoder(cfg.decoder))
+        _side_by_side(figure, scene, truth, photos.images, renders, decoder)
     return {"mode": mode, **{k: round(v, 4) for k, v in score.items()}, "field_psnr": report["field_psnr"],
             "fit_seconds": round(seconds, 1), "box": np.round(scene.box, 3).tolist(),
             "box_from": report.get("capture", {}).get("box_from"), **report.get("background", {}),

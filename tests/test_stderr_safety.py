@@ -162,7 +162,10 @@ def _same_as_opencv(data: bytes) -> None:
     for unchanged in (False, True):
         want = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED if unchanged else cv2.IMREAD_COLOR)
         got = decode_image(data, unchanged)
-        assert got.dtype == want.dtype and got.shape == want.shape and np.array_equal(got, want), unchanged
+        # equal here; one level allowed, since Pillow's and OpenCV's bundled libjpeg builds may differ on
+        # another CPU or wheel (a wrong orientation or channel order is off by far more)
+        assert got.dtype == want.dtype and got.shape == want.shape, unchanged
+        assert int(np.abs(got.astype(np.int64) - want.astype(np.int64)).max(initial=0)) <= 1, unchanged
 
 
 @pytest.mark.parametrize("orientation", range(1, 9))

@@ -44,7 +44,8 @@ def evaluate_planes(planes: np.ndarray, decoder, posed: PosedImages, views=None,
                     masks: np.ndarray | None = None) -> dict:
     """Render the test views (default `posed.test`) from planes (3, C, R, R) float32; mean PSNR/SSIM. With
     `background` (an OuterField and its `samples` per segment): rendered in front of it and scored on the pixels
-    of `masks` (V, H, W) bool, by default where these planes' opacity >= OBJECT_OPACITY (returned as "masks")."""
+    of `masks` (V, H, W) bool, by default where these planes' opacity >= OBJECT_OPACITY (returned as "masks");
+    its field_ssim is then the whole view's, background included."""
     views = posed.test if views is None else views
     device = next(decoder.parameters()).device
     p = torch.from_numpy(planes).to(device)
