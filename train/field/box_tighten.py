@@ -11,13 +11,11 @@ import time
 from dataclasses import replace
 
 import numpy as np
-import torch
 
 from snapshot3d.posed import PosedImages
 
 from .config import FitConfig
-from .field import decode, sample_planes
-from .sampler import BoxFrame
+from .render import cell_alpha
 
 __all__ = ["tighten_box", "box_from_density", "PREFIT_FRACTION"]
 
@@ -86,17 +84,6 @@ def _ground(alpha: np.ndarray, box: np.ndarray, looks_down: bool) -> tuple[np.nd
     return out, ground
 
 
-@torch.no_grad()
-def _cell_alpha(planes: torch.Tensor, decoder, box: np.ndarray, g: int = GRID) -> np.ndarray:
-    """(g, g, g) opacity of one cell of the planes over `box` at the cells' centres."""
-    frame = BoxFrame.from_box(box, planes.device)
-    t = (np.arange(g) + 0.5) / g * 2 - 1
-    unit = torch.from_numpy(np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3).astype(np.float32))
-    sigma = torch.cat([decode(sample_planes(planes, u.to(planes.device)), decoder)[0] for u in unit.split(1 << 16)])
-    cell_q = float((2 * frame.half_unit / g).mean())
-    return (1 - torch.exp(-sigma * cell_q)).cpu().numpy().reshape(g, g, g)
-
-
 def tighten_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tuple[np.ndarray, dict]:
     """The box of `posed` tightened from a short fit with the background model (PREFIT_FRACTION of cfg.steps,
     at least 10) -> (box (2, 3) float32 world, info for the report)."""
@@ -105,10 +92,11 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tup
     # the penalties at the box's walls and floor are left to the fit in the new box: here they thin the floor,
     # which is then found too low (spot: z = -1.08 against -0.92) and left in the box
     pre = replace(cfg, steps=max(10, int(cfg.steps * PREFIT_FRACTION)), background="outer", qat_fraction=0.0,
-                  channel_fraction=0.0, wall_weight=0.0, floor_weight=0.0)
+                  channel_fraction=0.0, wall_weight=0.0, floor_weight=0.0,
+                  object_steps=0.0)
     res = fit(posed, decoder, pre, device=device)
     looks_down = bool(np.mean(-posed.c2w[posed.train, 2, 2] < 0) > 0.5)   # optical axes (-z) pointing down
-    alpha = _cell_alpha(res.state.planes.planes.detach(), decoder, posed.box)
+    alpha = cell_alpha(res.state.planes.planes.detach(), decoder, posed.box, GRID)
     box, ground = box_from_density(alpha, np.asarray(posed.box, np.float64), looks_down, cfg.tighten_sides)
     info = {"first_box": np.round(posed.box, 4).tolist(), "ground_z": None if ground is None else round(ground, 4),
             "prefit_steps": pre.steps, "prefit_seconds": round(time.perf_counter() - t0, 1),

@@ -83,6 +83,10 @@ class FitConfig:
     tighten_sides: bool = config_field(True, "with --background outer and --box auto: the short pre-fit also cuts "
                                        "the box's sides and top to where its density lies, with a margin "
                                        "(train/field/box_tighten.py; fewer floaters, bench capture-background)")
+    object_steps: float = config_field(0.5, "with --background outer: after the fit, this share of its steps more "
+                                       "takes the planes to the object alone, against their own views with the "
+                                       "ground, the shadow and the haze cut away (train/field/object_carve.py); "
+                                       "0: off")
 
 
 @dataclass
@@ -129,6 +133,8 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
             not 0 <= cfg.ground_texture <= 1024 or not cfg.ground_depth >= 0:
         problems.append("--background-res must be >= 4, --background-samples >= 2, --background-lr > 0, "
                         "--ground-texture in 0..1024, --ground-depth >= 0")
+    if not 0 <= cfg.object_steps <= 4:
+        problems.append("--object-steps must be in [0, 4]")
     if min(cfg.distortion_weight, cfg.opacity_weight, cfg.wall_weight, cfg.floor_weight) < 0 or \
             not 0 < cfg.wall_margin <= 0.25:
         problems.append("--distortion-weight, --opacity-weight, --wall-weight and --floor-weight must be >= 0, "

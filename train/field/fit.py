@@ -251,5 +251,12 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
                 progress(st.step, psnr)
         if checkpoint is not None and st.step % cfg.checkpoint_every == 0:
             _save_ckpt(checkpoint, st, cfg, gen, posed.name)
+    if st.background is not None and cfg.object_steps > 0:   # the planes of the object alone (object_carve.py)
+        from .object_carve import object_config, object_views
+        target = object_views(st.planes.planes.detach(), decoder, posed)
+        if target is not None:
+            alone = fit(target[0], decoder, object_config(cfg), init_planes=st.planes.planes.detach(), hull=target[1],
+                        device=st.frame.centre.device)
+            st.planes.planes.data.copy_(alone.state.planes.planes.detach())
     codes = quantize_planes(st.planes.planes.detach().cpu().numpy())
     return FitResult(codes=codes, state=st, seconds=st.train_seconds, log=log)

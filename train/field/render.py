@@ -13,7 +13,7 @@ from .field import composite, decode, sample_planes
 from .rays import view_rays
 from .sampler import BoxFrame, march
 
-__all__ = ["render_rays", "render_views", "occupancy_from_planes", "density_fn"]
+__all__ = ["render_rays", "render_views", "occupancy_from_planes", "density_fn", "cell_alpha"]
 
 
 def density_fn(planes: Tensor, decoder):
@@ -30,6 +30,17 @@ def occupancy_from_planes(planes: Tensor, decoder, frame: BoxFrame, res: int = f
     alpha = 1 - torch.exp(-sigma * frame.step)
     occ = (alpha > formats.OCC_ALPHA_THRESHOLD).float().view(1, 1, res, res, res)
     return F.max_pool3d(occ, 3, stride=1, padding=1)[0, 0] > 0
+
+
+@torch.no_grad()
+def cell_alpha(planes: torch.Tensor, decoder, box: np.ndarray, g: int = formats.OCC_RES) -> np.ndarray:
+    """(g, g, g) opacity of one cell of the planes over `box` at the cells' centres."""
+    frame = BoxFrame.from_box(box, planes.device)
+    t = (np.arange(g) + 0.5) / g * 2 - 1
+    unit = torch.from_numpy(np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3).astype(np.float32))
+    sigma = torch.cat([decode(sample_planes(planes, u.to(planes.device)), decoder)[0] for u in unit.split(1 << 16)])
+    cell_q = float((2 * frame.half_unit / g).mean())
+    return (1 - torch.exp(-sigma * cell_q)).cpu().numpy().reshape(g, g, g)
 
 
 def render_rays(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor | None, o: Tensor, d: Tensor,

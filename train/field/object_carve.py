@@ -1,0 +1,93 @@
+"""The object alone, out of a fit with the background model (fit --background outer, cfg.object_steps): the planes
+of such a fit still paint the ground's texture and the object's shadow in the lowest layers of the box, and a haze
+round the object, all of which the background model would have had to hold in finer detail than it has. The
+snapshot carries the planes alone, over white, so those would print as a dark slab under the object.
+
+After the fit, `object_cells` finds the object's cells in a grid of the planes' one-cell opacities [ix, iy, iz] over
+the box (z up, its floor cut at the ground by `box_tighten`): the solid cells (opacity above SOLID), without those in
+the floor band (the lowest FLOOR_BAND of the box) over which nothing solid stands (no solid cell within REACH cells
+sideways in the ABOVE layers just over the band: a leg or a body resting on the ground keeps its cells, the ground's
+texture and the object's shadow round it do not); of those, the connected pieces at least KEEP_SHARE of the
+largest's size; then grown by NEAR cells, so that the object's soft edge stays. `object_views` renders the training
+views of the fitted planes with every other cell skipped, over white, and fits the planes to those views (from where
+they are, DISTIL_LR) with the object's cells as their hull: the rays skip the other cells and the empty-space
+penalty (`fit._empty_alpha`) drives their density to zero, so that the decode side, which finds its occupancy from
+the planes alone, sees them empty too (`fit.fit` runs that fit). Fitting them with the cells cut while still
+against the photos instead lost the legs and 3 to 4 dB on spot (docs/capture.md).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from snapshot3d import formats
+from snapshot3d.posed import PosedImages
+
+__all__ = ["object_cells", "object_views", "object_config", "SOLID", "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
+           "TEACHER_SIZE", "DISTIL_LR"]
+
+SOLID = 0.2         # one-cell opacity of an object's cell (0.5 cut half of a short fit's cloudy teapot)
+FLOOR_BAND = 0.1    # of the box's height: where the ground's texture and the shadow are painted
+ABOVE = 0.05        # of the box's height, just over the band: where what stands on the floor must be solid
+REACH = 1           # cells sideways
+KEEP_SHARE = 0.05   # connected pieces smaller than this share of the largest are floaters
+NEAR = 2            # cells the object's cells are grown by
+TEACHER_SIZE = 400  # longer side, pixels, of the views the planes are fitted to (the capture's when smaller)
+DISTIL_LR = 0.01    # the planes' learning rate then, at the first step
+
+
+def object_cells(alpha: np.ndarray, solid: float = SOLID, floor_band: float = FLOOR_BAND, above: float = ABOVE,
+                 reach: int = REACH, keep_share: float = KEEP_SHARE, near: int = NEAR) -> np.ndarray:
+    """alpha (G, G, G) [ix, iy, iz] one-cell opacity over the box (z up, its floor on the ground) -> (G, G, G)
+    bool, the object's cells (all False when nothing is solid)."""
+    from skimage.measure import label
+    from skimage.morphology import isotropic_dilation
+
+    cells = alpha > solid
+    g = alpha.shape[2]
+    band, top = math.ceil(floor_band * g), math.ceil((floor_band + above) * g)
+    stands = cells[:, :, band:top].any(axis=2)
+    if reach > 0:
+        stands = isotropic_dilation(stands, reach)
+    cells[:, :, :band] &= stands[:, :, None]
+    pieces = label(cells, connectivity=3)
+    sizes = np.bincount(pieces.ravel())[1:]
+    if sizes.size == 0:
+        return cells
+    cells = np.isin(pieces, np.nonzero(sizes >= keep_share * sizes.max())[0] + 1)
+    return isotropic_dilation(cells, near) if near > 0 else cells
+
+
+def object_views(planes, decoder, posed: PosedImages):
+    """planes (3, C, R, R) torch, fitted with the background model over posed.box -> (the views to fit the object
+    alone to: posed's training views rendered over white with the object's cells only, at most TEACHER_SIZE pixels
+    on the longer side, as a PosedImages; the object's cells (G, G, G) bool torch, their hull), or None when no cell
+    is solid."""
+    import torch
+
+    from .render import cell_alpha, occupancy_from_planes, render_views
+    from .sampler import BoxFrame
+
+    box = np.asarray(posed.box, np.float32)
+    keep = torch.from_numpy(object_cells(cell_alpha(planes, decoder, box, formats.OCC_RES))).to(planes.device)
+    if not bool(keep.any()):
+        return None
+    occ = occupancy_from_planes(planes, decoder, BoxFrame.from_box(box, planes.device)) & keep
+    tr = posed.train
+    scale = min(1.0, TEACHER_SIZE / max(posed.width, posed.height))
+    w, h = max(1, round(posed.width * scale)), max(1, round(posed.height * scale))
+    intrinsics = (posed.intrinsics[tr] * np.float32(scale)).astype(np.float32)
+    views = render_views(planes, decoder, box, posed.c2w[tr], intrinsics, w, h, occ=occ)
+    return PosedImages(images=views, alpha=(np.abs(views - 1).max(-1) > 0.01).astype(np.float32), c2w=posed.c2w[tr],
+                       intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
+                       name=posed.name), keep
+
+
+def object_config(cfg):
+    """The FitConfig of the fit to `object_views`: round(cfg.steps * cfg.object_steps) steps over white, from
+    DISTIL_LR down to cfg's last learning rate, the poses as they are."""
+    steps = max(1, round(cfg.steps * cfg.object_steps))
+    return replace(cfg, steps=steps, background="white", refine_poses="off", object_steps=0.0, lr=DISTIL_LR,
+                   lr_final=min(cfg.lr_final, DISTIL_LR), occ_warmup=max(1, steps // 10))
