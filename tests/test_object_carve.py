@@ -75,3 +75,28 @@ def test_the_object_only_planes_empty_the_other_cells_and_keep_the_object():
     assert after[:, :, 1][ground].mean() < 0.3 * before[:, :, 1][ground].mean(), (after[:, :, 1][ground].mean(),
                                                                                     before[:, :, 1][ground].mean())
     assert after[column].mean() > 0.8 * before[column].mean(), (after[column].mean(), before[column].mean())
+
+
+def test_a_fit_whose_box_found_no_ground_skips_the_step():
+    """The automatic box looked for the ground and did not find it (ground_z None): the fit ends as without the
+    step; with the ground found, the step changes the planes."""
+    from dataclasses import replace
+
+    from snapshot3d.cameras import orbit_poses
+    from snapshot3d.posed import PosedImages
+    from snapshot3d.train.field.decoder import load_decoder
+    from snapshot3d.train.field.fit import fit
+
+    c2w = np.asarray(orbit_poses(6, 3.5, 30.0), np.float32)
+    rng = np.random.default_rng(0)
+    posed = PosedImages(images=rng.random((6, 24, 24, 3), dtype=np.float32), alpha=None, c2w=c2w,
+                        intrinsics=np.tile(np.array([[20.0, 20.0, 12.0, 12.0]], np.float32), (6, 1)),
+                        box=np.array([[-1, -1, -1], [1, 1, 1]], np.float32), train=np.arange(6), test=np.arange(0))
+    cfg = FitConfig(steps=20, batch_rays=256, plane_res=16, plane_channels=4, occ_warmup=4, background="outer",
+                    refine_poses="off")
+    decoder = load_decoder()
+    codes = {}
+    for name, ground, steps in (("lost", None, 0.5), ("off", None, 0.0), ("found", -1.0, 0.5)):
+        codes[name] = fit(replace(posed, info={"ground_z": ground}), decoder, replace(cfg, object_steps=steps)).codes
+    assert np.array_equal(codes["lost"], codes["off"])
+    assert not np.array_equal(codes["found"], codes["off"])

@@ -85,8 +85,8 @@ class FitConfig:
                                        "(train/field/box_tighten.py; fewer floaters, bench capture-background)")
     object_steps: float = config_field(0.5, "with --background outer: after the fit, this share of its steps more "
                                        "takes the planes to the object alone, against their own views with the "
-                                       "ground, the shadow and the haze cut away (train/field/object_carve.py); "
-                                       "0: off")
+                                       "ground, the shadow and the haze cut away (train/field/object_carve.py; "
+                                       "skipped when the automatic box found no ground); 0: off")
 
 
 @dataclass

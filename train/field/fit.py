@@ -251,7 +251,10 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
                 progress(st.step, psnr)
         if checkpoint is not None and st.step % cfg.checkpoint_every == 0:
             _save_ckpt(checkpoint, st, cfg, gen, posed.name)
-    if st.background is not None and cfg.object_steps > 0:   # the planes of the object alone (object_carve.py)
+    # the planes of the object alone (object_carve.py), unless the automatic box looked for the ground and did not find
+    # it: the ground then stays in the box as one piece with the object, and the step only costs (docs/capture.md)
+    lost_ground = "ground_z" in posed.info and posed.info["ground_z"] is None
+    if st.background is not None and cfg.object_steps > 0 and not lost_ground:
         from .object_carve import object_config, object_views
         target = object_views(st.planes.planes.detach(), decoder, posed)
         if target is not None:
