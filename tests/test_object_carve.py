@@ -95,8 +95,11 @@ def test_a_fit_whose_box_found_no_ground_skips_the_step():
     cfg = FitConfig(steps=20, batch_rays=256, plane_res=16, plane_channels=4, occ_warmup=4, background="outer",
                     refine_poses="off")
     decoder = load_decoder()
-    codes = {}
+    codes, bars = {}, []
     for name, ground, steps in (("lost", None, 0.5), ("off", None, 0.0), ("found", -1.0, 0.5)):
-        codes[name] = fit(replace(posed, info={"ground_z": ground}), decoder, replace(cfg, object_steps=steps)).codes
+        bar = lambda n, name=name: bars.append((name, n)) or (lambda step, psnr: None)  # noqa: E731
+        codes[name] = fit(replace(posed, info={"ground_z": ground}), decoder, replace(cfg, object_steps=steps),
+                          object_bar=bar).codes
     assert np.array_equal(codes["lost"], codes["off"])
     assert not np.array_equal(codes["found"], codes["off"])
+    assert bars == [("found", 10)]   # the step's own progress, for its 10 steps

@@ -96,7 +96,9 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
             init = F.interpolate(big[:, :ch], size=(res, res), mode="area")
         t0 = time.perf_counter()
         res_ = fit(posed, decoder, rcfg, init_planes=init, hull=hull, device=device,
-                   progress=progress_factory(f"R={res} C={ch}", rcfg.steps) if progress_factory else None)
+                   progress=progress_factory(f"R={res} C={ch}", rcfg.steps) if progress_factory else None,
+                   object_bar=(lambda n, r=res, c=ch: progress_factory(f"R={r} C={c} object alone", n))
+                   if progress_factory else None)
         seconds = time.perf_counter() - t0
         if big is None:
             big = torch.from_numpy(dequantize_planes(res_.codes))

@@ -106,7 +106,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         report["medium"] = medium
     elif budget == "fixed":
         res = fit(posed, decoder, cfg, checkpoint=checkpoint, progress=bars("fit", cfg.steps) if bars else None,
-                  device=device)
+                  device=device, object_bar=(lambda n: bars("object alone", n)) if bars else None)
         codes, steps = res.codes, cfg.steps
         ev = evaluate_planes(dequantize_planes(codes), decoder, posed, background=res.state.background,
                              samples=cfg.background_samples)

@@ -227,10 +227,12 @@ def _load_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, s
 
 
 def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = None, progress=None,
-        init_planes: torch.Tensor | None = None, hull: torch.Tensor | None = None, device=None) -> FitResult:
+        init_planes: torch.Tensor | None = None, hull: torch.Tensor | None = None, device=None,
+        object_bar=None) -> FitResult:
     """Optimise planes for `posed` with the frozen `decoder` on `device` (None: the CPU; the decoder is
-    moved there). `progress(step, psnr)` is called every few steps. With `checkpoint`, state is saved
-    every `cfg.checkpoint_every` steps and a run resumes from it."""
+    moved there). `progress(step, psnr)` is called every few steps; `object_bar(steps)` gives that callback
+    for the object-alone step's fit, when it runs. With `checkpoint`, state is saved every
+    `cfg.checkpoint_every` steps and a run resumes from it."""
     for p in decoder.parameters():
         p.requires_grad_(False)
     torch.manual_seed(cfg.seed)
@@ -258,8 +260,9 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
         from .object_carve import object_config, object_views
         target = object_views(st.planes.planes.detach(), decoder, posed)
         if target is not None:
-            alone = fit(target[0], decoder, object_config(cfg), init_planes=st.planes.planes.detach(), hull=target[1],
-                        device=st.frame.centre.device)
+            sub = object_config(cfg)
+            alone = fit(target[0], decoder, sub, init_planes=st.planes.planes.detach(), hull=target[1],
+                        device=st.frame.centre.device, progress=object_bar(sub.steps) if object_bar else None)
             st.planes.planes.data.copy_(alone.state.planes.planes.detach())
     codes = quantize_planes(st.planes.planes.detach().cpu().numpy())
     return FitResult(codes=codes, state=st, seconds=st.train_seconds, log=log)
