@@ -8,7 +8,8 @@ the box (z up, its floor cut at the ground by `box_tighten`): the solid cells (o
 the floor band (the lowest FLOOR_BAND of the box) over which nothing solid stands (no solid cell within REACH cells
 sideways in the ABOVE layers just over the band: a leg or a body resting on the ground keeps its cells, the ground's
 texture and the object's shadow round it do not); of those, the connected pieces at least KEEP_SHARE of the
-largest's size; then grown by NEAR cells, so that the object's soft edge stays. `object_views` renders the training
+largest's size; then grown by NEAR cells, so that the object's soft edge stays, but not into the floor band
+beyond what stands there. `object_views` renders the training
 views of the fitted planes with every other cell skipped, over white, and fits the planes to those views (from where
 they are, DISTIL_LR) with the object's cells as their hull: the rays skip the other cells and the empty-space
 penalty (`fit._empty_alpha`) drives their density to zero, so that the decode side, which finds its occupancy from
@@ -57,7 +58,10 @@ def object_cells(alpha: np.ndarray, solid: float = SOLID, floor_band: float = FL
     if sizes.size == 0:
         return cells
     cells = np.isin(pieces, np.nonzero(sizes >= keep_share * sizes.max())[0] + 1)
-    return isotropic_dilation(cells, near) if near > 0 else cells
+    if near > 0:
+        cells = isotropic_dilation(cells, near)
+        cells[:, :, :band] &= stands[:, :, None]   # not grown into the ground round the feet
+    return cells
 
 
 def object_views(planes, decoder, posed: PosedImages):
