@@ -12,8 +12,7 @@ import torch
 from snapshot3d.metrics import psnr, ssim
 from snapshot3d.posed import PosedImages
 
-from .rays import view_rays
-from .render import occupancy_from_planes, render_views
+from .render import occupancy_from_planes, render_pixels, render_views
 from .sampler import BoxFrame
 
 __all__ = ["evaluate_planes", "render_with_model", "OBJECT_OPACITY"]
@@ -29,15 +28,9 @@ def render_with_model(planes: torch.Tensor, decoder, background, samples: int, p
     from .background import render_with_background
     frame = BoxFrame.from_box(posed.box, planes.device)
     occ = occupancy_from_planes(planes, decoder, frame)
-    rgb = np.empty((len(views), posed.height, posed.width, 3), np.float32)
-    acc = np.empty((len(views), posed.height, posed.width), np.float32)
-    for k, i in enumerate(views):
-        o, d = view_rays(posed.c2w[i], posed.intrinsics[i], posed.width, posed.height, frame)
-        out = [render_with_background(planes, decoder, frame, occ, background, oc, dc, samples)[:2]
-               for oc, dc in zip(o.split(chunk), d.split(chunk))]
-        rgb[k] = torch.cat([c for c, _ in out]).clamp(0, 1).reshape(posed.height, posed.width, 3).cpu().numpy()
-        acc[k] = torch.cat([a for _, a in out]).reshape(posed.height, posed.width).cpu().numpy()
-    return rgb, acc
+    views = np.asarray(views)
+    return render_pixels(lambda o, d: render_with_background(planes, decoder, frame, occ, background, o, d, samples)[:2],
+                         frame, posed.c2w[views], posed.intrinsics[views], posed.width, posed.height, chunk)
 
 
 def evaluate_planes(planes: np.ndarray, decoder, posed: PosedImages, views=None, background=None, samples: int = 24,

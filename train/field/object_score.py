@@ -10,8 +10,7 @@ from snapshot3d.carve import grid_centres
 from snapshot3d.posed import PosedImages
 
 from .field import decode, sample_planes
-from .rays import view_rays
-from .render import occupancy_from_planes, render_rays
+from .render import occupancy_from_planes, render_pixels, render_rays
 from .sampler import BoxFrame
 
 __all__ = ["score_object", "density_share_outside_box"]
@@ -46,12 +45,11 @@ def score_object(planes: torch.Tensor, decoder, box, truth: PosedImages, true_bo
     views = truth.test if views is None else views
     frame = BoxFrame.from_box(box, planes.device)
     occ = occupancy_from_planes(planes, decoder, frame)
+    views = np.asarray(views)
+    rgbs, accs = render_pixels(lambda o, d: render_rays(planes, decoder, frame, occ, o, d)[:2], frame, truth.c2w[views],
+                               truth.intrinsics[views], truth.width, truth.height, chunk)
     obj, white, acc_in, acc_near, acc_all = [], [], 0.0, 0.0, 0.0
-    for i in views:
-        o, d = view_rays(truth.c2w[i], truth.intrinsics[i], truth.width, truth.height, frame)
-        out = [render_rays(planes, decoder, frame, occ, oc, dc)[:2] for oc, dc in zip(o.split(chunk), d.split(chunk))]
-        rgb = torch.cat([c for c, _ in out]).clamp(0, 1).cpu().numpy().reshape(truth.height, truth.width, 3)
-        acc = torch.cat([a for _, a in out]).cpu().numpy().reshape(truth.height, truth.width)
+    for i, rgb, acc in zip(views, rgbs, accs):
         mask, gt = truth.alpha[i] >= 0.5, truth.images[i]
         err = (rgb - gt) ** 2
         obj.append(-10 * np.log10(max(float(err[mask].mean()), 1e-10)))

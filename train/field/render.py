@@ -13,7 +13,7 @@ from .field import composite, decode, sample_planes
 from .rays import view_rays
 from .sampler import BoxFrame, march
 
-__all__ = ["render_rays", "render_views", "occupancy_from_planes", "density_fn", "cell_alpha"]
+__all__ = ["render_rays", "render_views", "occupancy_from_planes", "density_fn", "cell_alpha", "render_pixels"]
 
 
 def density_fn(planes: Tensor, decoder):
@@ -69,17 +69,29 @@ def render_rays(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor | None, o:
 
 
 @torch.no_grad()
+def render_pixels(ray_fn, frame: BoxFrame, c2w: np.ndarray, intrinsics: np.ndarray, width: int, height: int,
+                  chunk: int = 8192, progress=None) -> tuple[np.ndarray, np.ndarray]:
+    """Views through `ray_fn(o, d) -> (colour (N, 3), opacity (N,))` of q-space rays in `frame`, chunked, for
+    cameras c2w (V, 4, 4) OpenGL, intrinsics (V, 4) -> RGB (V, H, W, 3) float32 clamped to [0, 1], opacity (V, H, W)
+    float32. `progress(i)` after each view."""
+    rgb = np.empty((len(c2w), height, width, 3), np.float32)
+    acc = np.empty((len(c2w), height, width), np.float32)
+    for i in range(len(c2w)):
+        o, d = view_rays(c2w[i], intrinsics[i], width, height, frame)
+        out = [ray_fn(oc, dc) for oc, dc in zip(o.split(chunk), d.split(chunk))]
+        rgb[i] = torch.cat([c for c, _ in out]).clamp(0, 1).reshape(height, width, 3).cpu().numpy()
+        acc[i] = torch.cat([a for _, a in out]).reshape(height, width).cpu().numpy()
+        if progress is not None:
+            progress(i)
+    return rgb, acc
+
+
+@torch.no_grad()
 def render_views(planes: Tensor, decoder, box, c2w: np.ndarray, intrinsics: np.ndarray, width: int,
                  height: int, occ: Tensor | None = None, chunk: int = 8192, progress=None) -> np.ndarray:
     """Views (N, H, W, 3) float32 RGB in [0, 1] for cameras c2w (N, 4, 4) OpenGL, intrinsics (N, 4)."""
     frame = BoxFrame.from_box(box, planes.device)
     if occ is None:
         occ = occupancy_from_planes(planes, decoder, frame)
-    out = np.empty((len(c2w), height, width, 3), np.float32)
-    for i in range(len(c2w)):
-        o, d = view_rays(c2w[i], intrinsics[i], width, height, frame)
-        cols = [render_rays(planes, decoder, frame, occ, oc, dc)[0] for oc, dc in zip(o.split(chunk), d.split(chunk))]
-        out[i] = torch.cat(cols).clamp(0, 1).reshape(height, width, 3).cpu().numpy()
-        if progress is not None:
-            progress(i)
-    return out
+    return render_pixels(lambda o, d: render_rays(planes, decoder, frame, occ, o, d)[:2], frame, c2w, intrinsics,
+                         width, height, chunk, progress)[0]
