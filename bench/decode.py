@@ -35,6 +35,7 @@ from snapshot3d.metrics import psnr
 from snapshot3d.paths import asset
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.scanner.imageio_safe import write_atomic
+from snapshot3d.scanner.presets import get_preset
 from snapshot3d.scanner.qr import scene_meta
 from snapshot3d.scanner.sheet import render_sheet
 from snapshot3d.scanner.simulate import simulate
@@ -151,7 +152,8 @@ def _calibration_rows(scenes: dict, codec: str, seeds: int, out: Path,
         for host in hosts:
             sheet = render_sheet(_snapshot(scene, codec, load_host(host)), scene_meta(scene, codec), 2)
             for sev in CALIB_SEVERITIES:
-                for seed in range(seeds):
+                # a digital capture (jpeg90, jpeg75) is the same photo at every seed: it is taken, and counted, once
+                for seed in range(seeds if get_preset(sev).physical else 1):
                     photo = _photo(sheet, sev, CALIB_SEED0 + seed, out)
                     try:
                         dec = decode_photo(photo, size=128)

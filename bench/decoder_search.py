@@ -2,7 +2,8 @@
 weights file written by `snapshot3d train decoder -o FILE`, or a shipped version's name) fits spot and lego at
 each plane size (`--sizes`, 1500 steps, the bench fit's scenes), and the fit is scored at held-out views
 (`field_psnr`), and again with Gaussian noise of std `--noise` added to its planes (`field_psnr_noise`: how
-much the decoder magnifies a plane error, what a print adds). One JSON line per fit is appended to `--out-file`
+much the decoder magnifies a plane error, what a print adds), and at the print ladder's sizes through the print
+channel's model (`e2e_print_model`, what `fit --budget auto --medium print` predicts with). One JSON line per fit is appended to `--out-file`
 (default bench/results/decoder_search.jsonl), which `bench decoders --search` charts. Made for a lent GPU
 (`--device cuda`); on 2 CPU cores a fit takes minutes."""
 from __future__ import annotations
@@ -39,6 +40,20 @@ def _decoder(spec: str, device):
     return spec, dec.to(device).eval()
 
 
+def _print_score(planes: np.ndarray, dec, posed, res: int, channels: int) -> dict:
+    """{"e2e_print_model": dB}: the held-out views of planes (3, C, R, R) through the print channel's model
+    (`budget.predicted_e2e`, the `moderate` medians of budget-curves.json, hosts coffee and chelsea), at the
+    print ladder's plane sizes; {} at others or without a model."""
+    from snapshot3d.train.field.budget import predicted_e2e
+    from snapshot3d.train.field.config import LADDER_PRINT
+    from snapshot3d.train.field.curves import print_channel
+
+    channel = print_channel()
+    if channel is None or (res, channels) not in LADDER_PRINT:
+        return {}
+    return {"e2e_print_model": round(predicted_e2e(planes, dec, posed, channel), 3)}
+
+
 def bench_decoder_search_command(args) -> int:
     from snapshot3d.scene import dequantize_planes
     from snapshot3d.train.device import resolve_device
@@ -69,6 +84,7 @@ def bench_decoder_search_command(args) -> int:
                        "field_psnr": round(evaluate_planes(planes, dec, posed)["field_psnr"], 3),
                        "field_psnr_noise": round(evaluate_planes(noisy, dec, posed)["field_psnr"], 3),
                        "noise_std": args.noise, "fit_seconds": round(time.perf_counter() - t0, 1),
+                       **_print_score(planes, dec, posed, r, c),
                        "hidden": dec.hidden, "layers": dec.layers, "device": str(device),
                        "command": "snapshot3d bench decoder-search " + " ".join(
                            f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items()

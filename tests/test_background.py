@@ -169,7 +169,7 @@ def test_an_unknown_background_is_refused_in_one_line():
     from snapshot3d.train.field.config import FitConfig, check_fit_config
     with pytest.raises(UserError, match="--background must be auto, white or outer, not 'black'"):
         check_fit_config(FitConfig(background="black"))
-    with pytest.raises(UserError, match="--background-samples >= 2"):
+    with pytest.raises(UserError, match="--background-samples must be >= 2, not 1"):
         check_fit_config(FitConfig(background="outer", background_samples=1))
 
 
@@ -232,8 +232,10 @@ def test_the_weights_path_renders_the_same_colour():
 def test_negative_regulariser_weights_are_refused_in_one_line():
     from snapshot3d.errors import UserError
     from snapshot3d.train.field.config import FitConfig, check_fit_config
-    with pytest.raises(UserError, match="--distortion-weight, --opacity-weight, --wall-weight and --floor-weight must be >= 0"):
+    with pytest.raises(UserError, match=r"^--distortion-weight must be >= 0, not -1.0$"):   # only the option that is wrong
         check_fit_config(FitConfig(background="outer", distortion_weight=-1.0))
+    with pytest.raises(UserError, match=r"^--ground-depth must be >= 0, not nan; --wall-margin must be in \(0, 0.25\], not 0.5$"):
+        check_fit_config(FitConfig(background="outer", ground_depth=float("nan"), wall_margin=0.5))
 
 
 def test_bench_fit_captures_is_parsed_and_an_unknown_mode_refused(tmp_path):

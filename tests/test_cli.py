@@ -41,7 +41,8 @@ def test_fit_unknown_builtin(tmp_path):
 
 @pytest.mark.parametrize("args,match", [
     (["--plane-channels", "20"], "--plane-channels must be in 1..12"),
-    (["--steps", "0"], "--steps, --batch-rays"),
+    (["--steps", "0"], "--steps must be >= 1, not 0"),
+    (["--ending", "channel"], "--ending must be auto or plain, not 'channel'"),
     (["--downscale", "0"], "--downscale must be >= 1"),
 ])
 def test_fit_bad_settings(tmp_path, args, match):

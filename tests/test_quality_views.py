@@ -175,13 +175,13 @@ def test_views_term_falls_with_the_plane_error_and_repeats():
 def test_shipped_print_calibration_reads_the_views_term():
     cal = load_calibration(formats.PRINT_CODEC)
     assert cal["predictor"] == VIEWS_PREDICTOR and (cal["slope"], cal["intercept"]) == (1.0, 0.0)
-    # measured by `bench quality` (seeds 1000-1001) on six scenes of 16x4 to 48x4. Issue 38's target is 1.5 dB on
-    # every scene: met on five, lego 16x4 at 1.63 (its lowest-gain `severe` photos; docs/decoder.md, third pass);
-    # the second pass read 1.57 there and 1.51 on lego 48x4 (now 0.91) on the same photos, the log10 line shipped
-    # before it 5.2 dB on spot 48x4
+    # measured by `bench quality` (4 photos per host and physical severity, each digital capture once) on six
+    # scenes of 16x4 to 48x4: issue 38's target, 1.5 dB on every scene, met (worst lego 16x4 1.38). Counting the
+    # seed-independent jpeg90/jpeg75 captures once per seed had read 1.63-1.78 there; the log10 line shipped before
+    # the views term read 5.1 dB on spot 48x4
     errors = {k: v["median_abs_error_db"] for k, v in cal["per_scene_held_out"].items()}
-    assert len(errors) >= 6 and max(errors.values()) <= 1.75, errors
-    assert sum(v > 1.5 for v in errors.values()) <= 1 and cal["held_out_rmse_db"] <= 1.45, errors
+    assert len(errors) >= 6 and max(errors.values()) <= 1.5, errors
+    assert cal["held_out_rmse_db"] <= 1.45, cal["held_out_rmse_db"]
     q = quality_estimate(formats.PRINT_CODEC, None, 0.12, 27.0)
     assert abs(q["restore_psnr_expected_db"] - (cal["intercept"] + cal["slope"] * 27.0)) < 0.01
     assert quality_estimate(formats.PRINT_CODEC, None, 0.12, None)["restore_psnr_expected_db"] is None

@@ -316,7 +316,7 @@ def add_commands(sub) -> None:
     bqe.add_argument("--check-scenes", default="bench/models/lego-print-auto.s3d,bench/models/spot-r24c4.s3d,"
                                                "bench/models/spot-r32c4.s3d,bench/models/spot-r48c4.s3d",
                      help="scenes held out of the fit (photos in the held-out hosts)")
-    bqe.add_argument("--seeds", type=int, default=2, help="photos per scene, host and severity")
+    bqe.add_argument("--seeds", type=int, default=4, help="photos per scene, host and physical severity (a digital capture, jpeg90 or jpeg75, is one photo at any seed)")
     bqe.add_argument("--calibration-dir", default=None,
                      help="where to write the line (default: the package's assets, which decode reads)")
     _quick(bqe, seeds=1, fit_scenes="bench/models/spot-print.s3d", check_scenes="bench/models/lego-print-auto.s3d",

@@ -29,6 +29,7 @@ from snapshot3d.scene import dequantize_planes
 
 from .config import LADDER, LADDER_PRINT, FitConfig
 from .curves import CURVES_FILE, PREDICT_HOSTS, codec_psnr, print_channel
+from .ending import Ending, ending_noise
 from .evaluate import evaluate_planes
 from .fit import fit, hull_grid
 
@@ -87,6 +88,9 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
     from snapshot3d.scene import Orbit, Scene
     hull = hull_grid(posed)
     rungs, big = [], None
+    if channel is not None and cfg.ending == "auto" and cfg.background != "outer" and cfg.qat_fraction > 0:
+        log(f"print budget: each rung's last {cfg.qat_fraction:.0%} of steps runs twice, plain and through the print "
+            f"channel's noise, and the ending expected better through a print is kept (--ending plain: once)")
     for i, (res, ch) in enumerate(ladder):
         rcfg = replace(cfg, plane_res=res, plane_channels=ch)
         init = None
@@ -95,10 +99,14 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
                            occ_warmup=0)
             init = F.interpolate(big[:, :ch], size=(res, res), mode="area")
         t0 = time.perf_counter()
+        ending = None
+        if channel is not None and cfg.ending == "auto":   # train/field/ending.py
+            ending = Ending(ending_noise(res, ch, channel, device),
+                            lambda planes: predicted_e2e(planes, decoder, posed, channel))
         res_ = fit(posed, decoder, rcfg, init_planes=init, hull=hull, device=device,
                    progress=progress_factory(f"R={res} C={ch}", rcfg.steps) if progress_factory else None,
                    object_bar=(lambda n, r=res, c=ch: progress_factory(f"R={r} C={c} object alone", n))
-                   if progress_factory else None)
+                   if progress_factory else None, ending=ending)
         seconds = time.perf_counter() - t0
         if big is None:
             big = torch.from_numpy(dequantize_planes(res_.codes))
@@ -108,7 +116,8 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
         kb = Scene(codes=res_.codes, box=posed.box, orbit=Orbit(radius=1.0)).scene_kb
         rungs.append({"plane_res": res, "plane_channels": ch, "scene_kb": round(kb, 2),
                       "field_psnr": round(ev["field_psnr"], 3), "field_ssim": round(ev["field_ssim"], 4),
-                      "fit_seconds": round(seconds, 1), "codes": res_.codes})
+                      "fit_seconds": round(seconds, 1), "codes": res_.codes,
+                      **({"ending": res_.ending} if res_.ending else {})})
         if medium is not None:
             c = codec_psnr(medium, int(res_.codes.size))
             rungs[-1].update(codec_psnr=round(c, 3), e2e_expected=round(expected_e2e(ev["field_psnr"], c), 3))
@@ -116,8 +125,13 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
                 e2e = predicted_e2e(dequantize_planes(res_.codes), decoder, posed, channel, **scoring)
                 rungs[-1].update(codec_psnr_curve=rungs[-1]["codec_psnr"], e2e_expected=round(e2e, 3),
                                  codec_psnr=round(codec_share(ev["field_psnr"], e2e), 3))
+        tail = ""
+        if res_.ending:
+            e = res_.ending["e2e_expected"]
+            tail = (f", last phase {'through the channel' if res_.ending['kept'] == 'channel' else 'plain'} "
+                    f"(expected {e['channel'] - e['plain']:+.2f} dB through the channel's noise)")
         log(f"ladder R={res} C={ch}: {kb:.1f} kB, field_psnr {ev['field_psnr']:.2f} dB"
             + (f", codec ({medium}{', this scene' if channel is not None else ''}) {rungs[-1]['codec_psnr']:.2f} dB, "
                f"e2e expected {rungs[-1]['e2e_expected']:.2f} dB"
-               if medium else "") + f", {seconds:.0f} s")
+               if medium else "") + f"{tail}, {seconds:.0f} s")
     return choose_rung(rungs, tolerance_db, "e2e_expected" if medium else "field_psnr"), rungs

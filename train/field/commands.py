@@ -102,7 +102,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         steps = cfg.steps
         ev["renders"] = None
         report["ladder"] = [{k: r[k] for k in ("plane_res", "plane_channels", "scene_kb", "field_psnr", "codec_psnr",
-                                               "codec_psnr_curve", "e2e_expected", "fit_seconds") if k in r} for r in rungs]
+                                               "codec_psnr_curve", "e2e_expected", "ending", "fit_seconds") if k in r} for r in rungs]
         report["medium"] = medium
     elif budget == "fixed":
         res = fit(posed, decoder, cfg, checkpoint=checkpoint, progress=bars("fit", cfg.steps) if bars else None,

@@ -34,6 +34,10 @@ class FitConfig:
                                         "at the design severity)")
     channel_gain: bool = config_field(False, "in that phase, also the model's per-coefficient gain (the receiver's "
                                       "shrinkage); off: its noise alone, which measured better (bench fit-channel)")
+    ending: str = config_field("auto", "with --budget auto --medium print: auto fits each rung's last phase "
+                               "(--qat-fraction) both plain and through the print channel model's noise, and keeps "
+                               "the second where the model expects it at least 0.3 dB better at held-out views "
+                               "(train/field/ending.py; not with --background outer); plain: the plain ending alone")
     fg_fraction: float = config_field(0.75, "share of each batch drawn from rays that see the object (when masks exist)")
     tv_weight: float = config_field(1e-4, "total-variation weight on the planes")
     empty_weight: float = config_field(1.0, "weight of the density penalty at random points outside the visual hull")
@@ -103,42 +107,45 @@ class DecoderConfig:
     nested: tuple = config_field((4, 8, 12), "channel counts drawn each step, so that one decoder serves any C")
     plane_noise: float = config_field(0.0, "each step adds Gaussian noise to the planes the decoder reads, its std "
                                       "drawn uniformly in [0, this] (plane values span [-1, 1]); 0: off")
+    channel_noise: float = config_field(0.0, "at the print ladder's plane sizes (LADDER_PRINT), the planes the decoder "
+                                        "reads get the print channel model's noise per DCT coefficient "
+                                        "(channel_fit.py), scaled by a factor drawn uniformly in [0, this]; 0: off")
     lr: float = config_field(3e-3, "decoder Adam learning rate, decayed 10x over the run")
     size: int = config_field(200, "rendered view size of the training scenes")
     seed: int = config_field(0, "random seed")
 
 
+def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
+    """(option, holds, what it must be) for every numeric bound of a fit's settings (NaN holds none)."""
+    def v(option: str):
+        return getattr(cfg, option.replace("-", "_"))
+    return [
+        ("plane-channels", 1 <= cfg.plane_channels <= formats.C_MAX, f"in 1..{formats.C_MAX}"),
+        ("plane-res", cfg.plane_res >= 2, ">= 2"),
+        *((k, v(k) >= 1, ">= 1") for k in ("steps", "batch-rays", "occ-every", "checkpoint-every")),
+        *((k, v(k) > 0, "> 0") for k in ("lr", "lr-final", "pose-lr", "background-lr")),
+        *((k, 0 <= v(k) <= 1, "in [0, 1]") for k in ("qat-fraction", "channel-fraction", "fg-fraction")),
+        *((k, 0 <= v(k) < 1, "in [0, 1)") for k in ("min-transmittance", "pose-start")),
+        *((k, v(k) >= 0, ">= 0") for k in ("channel-noise", "ground-depth", "distortion-weight", "opacity-weight",
+                                           "wall-weight", "floor-weight")),
+        ("background-res", cfg.background_res >= 4, ">= 4"),
+        ("background-samples", cfg.background_samples >= 2, ">= 2"),
+        ("ground-texture", 0 <= cfg.ground_texture <= 1024, "in 0..1024"),
+        ("object-steps", 0 <= cfg.object_steps <= 4, "in [0, 4]"),
+        ("wall-margin", 0 < cfg.wall_margin <= 0.25, "in (0, 0.25]"),
+    ]
+
+
 def check_fit_config(cfg: FitConfig) -> FitConfig:
-    """Refuse settings no fit can run with (one-line `UserError`); returns `cfg`."""
-    problems = []
-    if not 1 <= cfg.plane_channels <= formats.C_MAX:
-        problems.append(f"--plane-channels must be in 1..{formats.C_MAX}")
-    if cfg.plane_res < 2:
-        problems.append("--plane-res must be >= 2")
-    if cfg.steps < 1 or cfg.batch_rays < 1 or cfg.occ_every < 1 or cfg.checkpoint_every < 1:
-        problems.append("--steps, --batch-rays, --occ-every and --checkpoint-every must be >= 1")
-    if not (cfg.lr > 0 and cfg.lr_final > 0):
-        problems.append("--lr and --lr-final must be > 0")
-    if not (0 <= cfg.qat_fraction <= 1 and 0 <= cfg.channel_fraction <= 1 and 0 <= cfg.fg_fraction <= 1
-            and 0 <= cfg.min_transmittance < 1 and cfg.channel_noise >= 0 and 0 <= cfg.pose_start < 1):
-        problems.append("--qat-fraction, --channel-fraction and --fg-fraction must be in [0, 1], "
-                        "--min-transmittance and --pose-start in [0, 1), --channel-noise >= 0")
-    if cfg.background not in ("auto", "white", "outer"):
-        problems.append(f"--background must be auto, white or outer, not {cfg.background!r}")
-    if cfg.refine_poses not in ("auto", "on", "off"):
-        problems.append(f"--refine-poses must be auto, on or off, not {cfg.refine_poses!r}")
-    if not cfg.pose_lr > 0:
-        problems.append("--pose-lr must be > 0")
-    if cfg.background_res < 4 or cfg.background_samples < 2 or not cfg.background_lr > 0 or \
-            not 0 <= cfg.ground_texture <= 1024 or not cfg.ground_depth >= 0:
-        problems.append("--background-res must be >= 4, --background-samples >= 2, --background-lr > 0, "
-                        "--ground-texture in 0..1024, --ground-depth >= 0")
-    if not 0 <= cfg.object_steps <= 4:
-        problems.append("--object-steps must be in [0, 4]")
-    if min(cfg.distortion_weight, cfg.opacity_weight, cfg.wall_weight, cfg.floor_weight) < 0 or \
-            not 0 < cfg.wall_margin <= 0.25:
-        problems.append("--distortion-weight, --opacity-weight, --wall-weight and --floor-weight must be >= 0, "
-                        "--wall-margin in (0, 0.25]")
+    """Refuse settings no fit can run with (one-line `UserError` naming each option that is out of range and
+    its value); returns `cfg`."""
+    problems = [f"--{k} must be {what}, not {getattr(cfg, k.replace('-', '_'))!r}"
+                for k, ok, what in _ranges(cfg) if not ok]
+    for option, value, allowed in (("ending", cfg.ending, ("auto", "plain")),
+                                   ("background", cfg.background, ("auto", "white", "outer")),
+                                   ("refine-poses", cfg.refine_poses, ("auto", "on", "off"))):
+        if value not in allowed:
+            problems.append(f"--{option} must be {', '.join(allowed[:-1])} or {allowed[-1]}, not {value!r}")
     if cfg.decoder not in formats.DECODERS:
         problems.append(f"--decoder must be one of {', '.join(formats.DECODERS)}, not {cfg.decoder!r}")
     if problems:

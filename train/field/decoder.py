@@ -18,7 +18,7 @@ from snapshot3d import formats
 from snapshot3d.errors import UserError
 from snapshot3d.paths import asset
 
-from .config import DecoderConfig, FitConfig
+from .config import LADDER_PRINT, DecoderConfig, FitConfig
 from .field import Decoder
 from .fit import new_state, train_step
 
@@ -41,9 +41,29 @@ def load_decoder(version: str = formats.DECODER_VERSION) -> Decoder:
     return dec
 
 
+def _channel_noise_fn(cfg: DecoderConfig, res: int, channels: int, responses: dict, gen: torch.Generator, device):
+    """None, or planes (3, channels, res, res) -> the same plus one draw of the print channel model's noise per
+    DCT coefficient (`channel_fit.through_channel` without its shrinkage), scaled by U(0, cfg.channel_noise);
+    only at the print ladder's plane sizes, where a snapshot can travel as a print."""
+    from .channel_fit import response_tensors, through_channel
+
+    if cfg.channel_noise <= 0 or (res, channels) not in LADDER_PRINT:
+        return None
+    if (res, channels) not in responses:
+        got = response_tensors(res, channels, device)
+        if got is None:
+            raise UserError("--channel-noise needs the print channel's model in budget-curves.json")
+        responses[(res, channels)] = got
+    d, _, s = responses[(res, channels)]
+    scale = cfg.channel_noise * float(torch.rand(1, generator=gen))
+    return lambda planes: through_channel(planes, d, torch.ones_like(s), scale * s, gen)
+
+
 def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None, log=print, device=None) -> dict:
     from snapshot3d.loaders import load_scene
 
+    if cfg.channel_noise < 0 or cfg.plane_noise < 0:
+        raise UserError("--channel-noise and --plane-noise must be >= 0")
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -55,7 +75,7 @@ def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None,
     states = [new_state(posed[n], fc, device=device) for (n, _), fc in zip(runs, fcfgs)]
     dec = Decoder(hidden=cfg.hidden, layers=cfg.layers).to(device or "cpu")
     opt = torch.optim.Adam(dec.parameters(), lr=cfg.lr)
-    step0, t_start, hist = 0, time.perf_counter(), {n: [] for n in names}
+    step0, t_start, hist, responses = 0, time.perf_counter(), {n: [] for n in names}, {}
     if checkpoint is not None and checkpoint.is_file():
         ck = torch.load(checkpoint, weights_only=False, map_location=device or "cpu")
         if ck["cfg"] != asdict(cfg):
@@ -71,7 +91,9 @@ def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None,
             g["lr"] = cfg.lr * 0.1 ** (step / (per_scene * len(runs)))
         c = int(cfg.nested[int(torch.randint(len(cfg.nested), (1,), generator=gen))])
         noise = cfg.plane_noise * float(torch.rand(1, generator=gen)) if cfg.plane_noise > 0 else 0.0
-        mse = train_step(states[k], dec, fcfgs[k], gen, extra_params_opt=opt, channels=c, plane_noise=noise)
+        fn = _channel_noise_fn(cfg, runs[k][1], c, responses, gen, device)
+        mse = train_step(states[k], dec, fcfgs[k], gen, extra_params_opt=opt, channels=c, plane_noise=noise,
+                         plane_fn=fn)
         hist[names[k]].append(mse)
         if (step + 1) % 250 == 0:
             line = " ".join(f"{n}={-10 * math.log10(np.mean(h[-20:])):.2f}" for n, h in hist.items() if h)

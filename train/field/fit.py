@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +17,7 @@ from snapshot3d import formats
 from snapshot3d.carve import carve
 from snapshot3d.errors import UserError
 from snapshot3d.posed import PosedImages
-from snapshot3d.scene import quantize_planes
+from snapshot3d.scene import dequantize_planes, quantize_planes
 
 from .channel_fit import through_channel
 from .config import FitConfig, check_fit_config
@@ -59,6 +59,8 @@ class FitResult:
     state: FitState
     seconds: float
     log: list = field(default_factory=list)
+    ending: dict | None = None
+    """with `fit(..., ending=)`: which last phase was kept and what the model expected of each"""
 
 
 def hull_grid(posed: PosedImages, res: int = formats.OCC_RES) -> torch.Tensor | None:
@@ -130,11 +132,11 @@ def lr_at(cfg: FitConfig, step: int) -> float:
 
 
 def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extra_params_opt=None,
-               channels: int | None = None, plane_noise: float = 0.0) -> float:
+               channels: int | None = None, plane_noise: float = 0.0, plane_fn=None) -> float:
     """One step on a batch of rays; updates planes (and the decoder when `extra_params_opt` is given).
     `channels` < C zeroes the trailing plane channels (nested channels while training the decoder);
     `plane_noise` > 0 adds Gaussian noise of that std to the planes the decoder reads (robustness to
-    what a medium restores)."""
+    what a medium restores); `plane_fn` maps the planes the decoder reads (after both) to others."""
     t0 = time.perf_counter()
     for g in st.opt.param_groups:
         g["lr"] = lr_at(cfg, st.step)
@@ -157,6 +159,8 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
         planes = planes[:, :channels]
     if plane_noise > 0:
         planes = planes + plane_noise * torch.randn(planes.shape, generator=gen).to(planes.device)
+    if plane_fn is not None:
+        planes = plane_fn(planes)
     occ = st.occ.occ if cfg.occupancy else None
     bg_terms = None
     if st.background is not None:
@@ -228,11 +232,13 @@ def _load_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, s
 
 def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = None, progress=None,
         init_planes: torch.Tensor | None = None, hull: torch.Tensor | None = None, device=None,
-        object_bar=None) -> FitResult:
+        object_bar=None, ending=None) -> FitResult:
     """Optimise planes for `posed` with the frozen `decoder` on `device` (None: the CPU; the decoder is
     moved there). `progress(step, psnr)` is called every few steps; `object_bar(steps)` gives that callback
     for the object-alone step's fit, when it runs. With `checkpoint`, state is saved every
-    `cfg.checkpoint_every` steps and a run resumes from it."""
+    `cfg.checkpoint_every` steps and a run resumes from it. `ending` (an `ending.Ending`; not with a
+    background model): the last phase is run both plain and through the channel's noise, and the channel
+    ending is kept where `ending.score` expects it `ending.MARGIN_DB` better (`FitResult.ending` says which)."""
     for p in decoder.parameters():
         p.requires_grad_(False)
     torch.manual_seed(cfg.seed)
@@ -241,18 +247,14 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
     decoder.to(st.frame.centre.device)
     if checkpoint is not None:
         _load_ckpt(checkpoint, st, cfg, gen, posed.name)
-    log, ema = [], None
-    while st.step < cfg.steps:
-        mse = train_step(st, decoder, cfg, gen)
-        ema = mse if ema is None else 0.9 * ema + 0.1 * mse
-        if st.step % 25 == 0 or st.step == cfg.steps:
-            psnr = -10 * math.log10(max(ema, 1e-10))
-            log.append({"step": st.step, "train_psnr": round(psnr, 3), "seconds": round(st.train_seconds, 2),
-                        "occupied": round(float(st.occ.occ.float().mean()), 4)})
-            if progress is not None:
-                progress(st.step, psnr)
-        if checkpoint is not None and st.step % cfg.checkpoint_every == 0:
-            _save_ckpt(checkpoint, st, cfg, gen, posed.name)
+    log = []
+    fork_at = cfg.steps - int(cfg.steps * cfg.qat_fraction)
+    if ending is None or st.background is not None or st.channel is not None or st.step > fork_at:
+        fork_at = cfg.steps
+    _run(st, decoder, cfg, gen, fork_at, log, progress, checkpoint, posed.name)
+    chosen = None
+    if st.step < cfg.steps:
+        st, chosen = _two_endings(st, decoder, cfg, gen, ending, log, progress, checkpoint, posed.name)
     # the planes of the object alone (object_carve.py), unless the automatic box looked for the ground and did not find
     # it: the ground then stays in the box as one piece with the object, and the step only costs (docs/capture.md)
     lost_ground = "ground_z" in posed.info and posed.info["ground_z"] is None
@@ -265,4 +267,42 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
                         device=st.frame.centre.device, progress=object_bar(sub.steps) if object_bar else None)
             st.planes.planes.data.copy_(alone.state.planes.planes.detach())
     codes = quantize_planes(st.planes.planes.detach().cpu().numpy())
-    return FitResult(codes=codes, state=st, seconds=st.train_seconds, log=log)
+    return FitResult(codes=codes, state=st, seconds=st.train_seconds, log=log, ending=chosen)
+
+
+def _run(st: FitState, decoder, cfg: FitConfig, gen, until: int, log: list | None, progress, checkpoint, name):
+    """Train `st` up to step `until`, logging (when `log` is a list), reporting and checkpointing as `fit`."""
+    ema = None
+    while st.step < until:
+        mse = train_step(st, decoder, cfg, gen)
+        ema = mse if ema is None else 0.9 * ema + 0.1 * mse
+        if log is not None and (st.step % 25 == 0 or st.step == cfg.steps):
+            psnr = -10 * math.log10(max(ema, 1e-10))
+            log.append({"step": st.step, "train_psnr": round(psnr, 3), "seconds": round(st.train_seconds, 2),
+                        "occupied": round(float(st.occ.occ.float().mean()), 4)})
+            if progress is not None:
+                progress(st.step, psnr)
+        if checkpoint is not None and st.step % cfg.checkpoint_every == 0:
+            _save_ckpt(checkpoint, st, cfg, gen, name)
+
+
+def _two_endings(st: FitState, decoder, cfg: FitConfig, gen, ending, log, progress, checkpoint, name):
+    """`fit`'s last phase run plain and through `ending.channel` from the same state -> (the kept state,
+    {"kept": "plain" | "channel", "e2e_expected": {ending: dB}, "seconds": the second ending's})."""
+    from .ending import MARGIN_DB, fork
+    twin, twin_gen = fork(st, gen)
+    _run(st, decoder, cfg, gen, cfg.steps, log, progress, checkpoint, name)
+    t0 = twin.train_seconds
+    twin.channel = ending.channel
+    _run(twin, decoder, replace(cfg, channel_fraction=cfg.qat_fraction), twin_gen, cfg.steps, None, None, None, name)
+    scores = {k: ending.score(dequantize_planes(quantize_planes(s.planes.planes.detach().cpu().numpy())))
+              for k, s in (("plain", st), ("channel", twin))}
+    kept = "channel" if scores["channel"] >= scores["plain"] + MARGIN_DB else "plain"
+    info = {"kept": kept, "e2e_expected": {k: round(v, 3) for k, v in scores.items()},
+            "seconds": round(twin.train_seconds - t0, 1)}
+    if kept == "channel":
+        twin.channel = None
+        twin.train_seconds += st.train_seconds - t0   # both endings' time counts
+        return twin, info
+    st.train_seconds += twin.train_seconds - t0
+    return st, info
