@@ -62,7 +62,9 @@ def test_plain_kept_below_the_margin_is_the_plain_fit_itself(small):
 def test_channel_kept_past_the_margin(small):
     posed, dec, cfg, hull = small
     score, seen = _scorer(MARGIN_DB + 0.01)
-    got = fit(posed, dec, cfg, hull=hull, ending=Ending(ending_noise(16, 4, print_channel()), score))
+    noise = ending_noise(16, 4, print_channel())
+    assert torch.equal(ending_noise(16, 4, print_channel(), scale=2.0)[2], 2.0 * noise[2])   # --channel-noise 2
+    got = fit(posed, dec, cfg, hull=hull, ending=Ending(noise, score))
     assert got.ending["kept"] == "channel" and got.state.channel is None
     np.testing.assert_array_equal(dequantize_planes(got.codes), seen[1])   # the channel ending's planes
     assert got.state.step == cfg.steps

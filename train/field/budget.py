@@ -29,7 +29,7 @@ from snapshot3d.scene import dequantize_planes
 
 from .config import LADDER, LADDER_PRINT, FitConfig
 from .curves import CURVES_FILE, PREDICT_HOSTS, codec_psnr, print_channel
-from .ending import Ending, ending_noise
+from .ending import Ending, ending_noise, ending_views
 from .evaluate import evaluate_planes
 from .fit import fit, hull_grid
 
@@ -101,8 +101,8 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
         t0 = time.perf_counter()
         ending = None
         if channel is not None and cfg.ending == "auto":   # train/field/ending.py
-            ending = Ending(ending_noise(res, ch, channel, device),
-                            lambda planes: predicted_e2e(planes, decoder, posed, channel))
+            ending = Ending(ending_noise(res, ch, channel, device, cfg.channel_noise),
+                            lambda planes: predicted_e2e(planes, decoder, posed, channel, views=ending_views(posed)))
         res_ = fit(posed, decoder, rcfg, init_planes=init, hull=hull, device=device,
                    progress=progress_factory(f"R={res} C={ch}", rcfg.steps) if progress_factory else None,
                    object_bar=(lambda n, r=res, c=ch: progress_factory(f"R={r} C={c} object alone", n))

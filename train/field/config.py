@@ -30,8 +30,8 @@ class FitConfig:
     qat_fraction: float = config_field(0.15, "last fraction of steps trained through the 8-bit rounding the snapshot carries")
     channel_fraction: float = config_field(0.0, "last fraction of steps trained through a model of the print channel "
                                            "(per-DCT-coefficient gain and noise, train/field/channel_fit.py; 0: off)")
-    channel_noise: float = config_field(1.0, "scale of the print channel model's noise in that phase (1: as measured "
-                                        "at the design severity)")
+    channel_noise: float = config_field(1.0, "scale of the print channel model's noise in that phase, and in the "
+                                        "channel ending of --ending auto (1: as measured at the design severity)")
     channel_gain: bool = config_field(False, "in that phase, also the model's per-coefficient gain (the receiver's "
                                       "shrinkage); off: its noise alone, which measured better (bench fit-channel)")
     ending: str = config_field("auto", "with --budget auto --medium print: auto fits each rung's last phase "

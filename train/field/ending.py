@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-__all__ = ["MARGIN_DB", "Ending", "ending_noise", "fork"]
+__all__ = ["MARGIN_DB", "Ending", "ending_noise", "ending_views", "fork"]
 
 MARGIN_DB = 0.3
 """how much better the model must expect the channel ending before the fit keeps it"""
@@ -40,15 +40,22 @@ class Ending:
 def _noise(res: int, channels: int, channel) -> np.ndarray:
     from .channel_fit import channel_response
     from .curves import PREDICT_HOSTS
-    return channel_response(res, channels, channel, PREDICT_HOSTS)[1]
+    return channel_response(res, channels, channel, PREDICT_HOSTS, draws=2)[1]
 
 
-def ending_noise(res: int, channels: int, channel, device=None) -> tuple:
+def ending_noise(res: int, channels: int, channel, device=None, scale: float = 1.0) -> tuple:
     """(D, ones, s) on `device`: the channel ending's stand-in for planes of (res, channels) through `channel`
-    (a `print_channel.ChannelModel`, hashable: the response is measured once per size and channel)."""
+    (a `print_channel.ChannelModel`, hashable: the response is measured once per size and channel), its noise
+    times `scale` (`FitConfig.channel_noise`)."""
     from .channel_fit import dct_matrix
-    s = torch.from_numpy(_noise(res, channels, channel))
+    s = torch.from_numpy(scale * _noise(res, channels, channel))
     return dct_matrix(res).to(device), torch.ones_like(s).to(device), s.to(device)
+
+
+def ending_views(posed, count: int = 5) -> np.ndarray:
+    """About `count` of the held-out views, evenly spread: enough to compare two endings scored on the same noise
+    draws (the ladder scores the kept ending on all of them)."""
+    return posed.test[:: max(1, len(posed.test) // count)]
 
 
 def fork(st, gen: torch.Generator):
