@@ -40,7 +40,7 @@ class Ending:
 def _noise(res: int, channels: int, channel) -> np.ndarray:
     from .channel_fit import channel_response
     from .curves import PREDICT_HOSTS
-    return channel_response(res, channels, channel, PREDICT_HOSTS, draws=2)[1]
+    return channel_response(res, channels, channel, PREDICT_HOSTS)[1]
 
 
 def ending_noise(res: int, channels: int, channel, device=None, scale: float = 1.0) -> tuple:
