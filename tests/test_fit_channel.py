@@ -63,7 +63,7 @@ def test_the_fits_last_phase_goes_through_the_channel(monkeypatch):
 
     # a stand-in response (unit gain, no noise): the phase is then the 8-bit rounding alone
     monkeypatch.setattr(channel_fit, "_cached_response",
-                        lambda r, c: (np.ones((r, r), np.float32), np.zeros((r, r), np.float32)))
+                        lambda r, c, channel: (np.ones((r, r), np.float32), np.zeros((r, r), np.float32)))
     monkeypatch.setattr(fit_module, "through_channel", spy)
     res = fit_module.fit(posed, dec, cfg, hull=hull)
     assert calls == [(3, 4, 16, 16)] * 15                     # the last half of 30 steps

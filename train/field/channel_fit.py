@@ -45,21 +45,26 @@ def channel_response(res: int, channels: int, channel, hosts, draws: int = 4, se
     return a.astype(np.float32), s.astype(np.float32)
 
 
-@lru_cache(maxsize=8)
-def _cached_response(res: int, channels: int) -> tuple[np.ndarray, np.ndarray] | None:
-    from .curves import PREDICT_HOSTS, print_channel
-
-    channel = print_channel()
-    return None if channel is None else channel_response(res, channels, channel, PREDICT_HOSTS)
+@lru_cache(maxsize=16)
+def _cached_response(res: int, channels: int, channel) -> tuple[np.ndarray, np.ndarray]:
+    from .curves import PREDICT_HOSTS
+    return channel_response(res, channels, channel, PREDICT_HOSTS)
 
 
-def response_tensors(res: int, channels: int, device=None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
-    """(D, a, s) on `device` for planes of (res, channels), the print channel's model as measured
-    (budget-curves.json; None without one): D the (R, R) orthonormal DCT matrix, a and s (R, R)."""
-    resp = _cached_response(res, channels)
-    if resp is None:
+def response_tensors(res: int, channels: int, device=None, channel=None, gain: bool = True,
+                     scale: float = 1.0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+    """(D, a, s) on `device` for planes of (res, channels) through `channel` (a hashable `print_channel.
+    ChannelModel`; None: the one measured in budget-curves.json, and None back without one): D the (R, R)
+    orthonormal DCT matrix, a and s (R, R); a all ones unless `gain`, s times `scale`. The response is measured
+    once per size and channel."""
+    from .curves import print_channel
+
+    channel = channel or print_channel()
+    if channel is None:
         return None
-    return tuple(t.to(device) for t in (dct_matrix(res), torch.from_numpy(resp[0]), torch.from_numpy(resp[1])))
+    a, s = (torch.from_numpy(x) for x in _cached_response(res, channels, channel))
+    a = a if gain else torch.ones_like(a)
+    return tuple(t.to(device) for t in (dct_matrix(res), a, scale * s))
 
 
 def dct_matrix(res: int) -> torch.Tensor:

@@ -50,13 +50,13 @@ def _channel_noise_fn(cfg: DecoderConfig, res: int, channels: int, responses: di
     if cfg.channel_noise <= 0 or (res, channels) not in LADDER_PRINT:
         return None
     if (res, channels) not in responses:
-        got = response_tensors(res, channels, device)
+        got = response_tensors(res, channels, device, gain=False)
         if got is None:
             raise UserError("--channel-noise needs the print channel's model in budget-curves.json")
         responses[(res, channels)] = got
-    d, _, s = responses[(res, channels)]
+    d, ones, s = responses[(res, channels)]
     scale = cfg.channel_noise * float(torch.rand(1, generator=gen))
-    return lambda planes: through_channel(planes, d, torch.ones_like(s), scale * s, gen)
+    return lambda planes: through_channel(planes, d, ones, scale * s, gen)
 
 
 def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None, log=print, device=None) -> dict:

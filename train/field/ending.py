@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Callable
 
 import numpy as np
@@ -36,20 +35,11 @@ class Ending:
     """planes (3, C, R, R) float32 -> the e2e_psnr a print of them is expected to give (dB)"""
 
 
-@lru_cache(maxsize=16)
-def _noise(res: int, channels: int, channel) -> np.ndarray:
-    from .channel_fit import channel_response
-    from .curves import PREDICT_HOSTS
-    return channel_response(res, channels, channel, PREDICT_HOSTS)[1]
-
-
 def ending_noise(res: int, channels: int, channel, device=None, scale: float = 1.0) -> tuple:
     """(D, ones, s) on `device`: the channel ending's stand-in for planes of (res, channels) through `channel`
-    (a `print_channel.ChannelModel`, hashable: the response is measured once per size and channel), its noise
-    times `scale` (`FitConfig.channel_noise`)."""
-    from .channel_fit import dct_matrix
-    s = torch.from_numpy(scale * _noise(res, channels, channel))
-    return dct_matrix(res).to(device), torch.ones_like(s).to(device), s.to(device)
+    (`channel_fit.response_tensors` without the gain), its noise times `scale` (`FitConfig.channel_noise`)."""
+    from .channel_fit import response_tensors
+    return response_tensors(res, channels, device, channel=channel, gain=False, scale=scale)
 
 
 def ending_views(posed, count: int = 5) -> np.ndarray:

@@ -105,11 +105,11 @@ def new_state_channel(cfg: FitConfig, device=None) -> tuple | None:
     if cfg.channel_fraction <= 0:
         return None
     from .channel_fit import response_tensors
-    channel = response_tensors(cfg.plane_res, cfg.plane_channels, device)
+    channel = response_tensors(cfg.plane_res, cfg.plane_channels, device, gain=cfg.channel_gain)
     if channel is None:
         raise UserError("--channel-fraction needs the print channel's model in budget-curves.json; "
                         "run 'snapshot3d bench print-predict'")
-    return channel if cfg.channel_gain else (channel[0], torch.ones_like(channel[1]), channel[2])
+    return channel
 
 
 def _tv(p: torch.Tensor) -> torch.Tensor:
