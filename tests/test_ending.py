@@ -102,3 +102,5 @@ def test_decoder_training_noise_only_at_the_print_ladders_sizes():
     assert noisy.shape == planes.shape and 0 < rms <= float(s.pow(2).mean().sqrt()) * 1.2, rms
     with pytest.raises(UserError, match="--channel-noise and --plane-noise must be >= 0"):
         train_decoder(DecoderConfig(channel_noise=-1.0), Path("unused.npz"))
+    with pytest.raises(UserError, match="--channel-noise and --plane-noise must be >= 0"):
+        train_decoder(DecoderConfig(channel_noise=float("nan")), Path("unused.npz"))

@@ -62,7 +62,7 @@ def _channel_noise_fn(cfg: DecoderConfig, res: int, channels: int, responses: di
 def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None, log=print, device=None) -> dict:
     from snapshot3d.loaders import load_scene
 
-    if cfg.channel_noise < 0 or cfg.plane_noise < 0:
+    if not (cfg.channel_noise >= 0 and cfg.plane_noise >= 0):   # NaN too
         raise UserError("--channel-noise and --plane-noise must be >= 0")
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
