@@ -104,3 +104,38 @@ def test_a_fit_whose_box_found_no_ground_skips_the_step():
     assert np.array_equal(codes["lost"], codes["off"])
     assert not np.array_equal(codes["found"], codes["off"])
     assert bars == [("found", 10)]   # the step's own progress, for its 10 steps
+
+
+def test_a_pixel_over_white_is_recomposited_over_another_colour():
+    from snapshot3d.train.field.rays import recomposite
+
+    colour, cover = torch.tensor([[0.2, 0.5, 0.9], [0.7, 0.1, 0.3]]), torch.tensor([0.25, 1.0])
+    behind = torch.tensor([[0.0, 0.3, 1.0], [0.6, 0.6, 0.6]])
+    over_white = colour * cover[:, None] + (1 - cover[:, None])
+    assert torch.allclose(recomposite(over_white, cover, behind), colour * cover[:, None] + (1 - cover[:, None]) * behind)
+
+
+def test_a_random_background_acts_where_the_images_carry_coverage_and_nowhere_else():
+    """--random-background: a fit of images with coverage trains over random colours (other planes); one of images
+    without coverage (a capture without masks) is the plain fit, bit for bit."""
+    from dataclasses import replace
+
+    from snapshot3d.cameras import orbit_poses
+    from snapshot3d.posed import PosedImages
+    from snapshot3d.train.field.decoder import load_decoder
+    from snapshot3d.train.field.fit import fit
+
+    c2w = np.asarray(orbit_poses(6, 3.5, 30.0), np.float32)
+    rng = np.random.default_rng(0)
+    cover = np.zeros((6, 24, 24), np.float32)
+    cover[:, 8:16, 8:16] = 1.0
+    posed = PosedImages(images=np.where(cover[..., None] > 0, rng.random((6, 24, 24, 3), dtype=np.float32), 1.0),
+                        alpha=cover, c2w=c2w, intrinsics=np.tile(np.array([[20.0, 20.0, 12.0, 12.0]], np.float32), (6, 1)),
+                        box=np.array([[-1, -1, -1], [1, 1, 1]], np.float32), train=np.arange(6), test=np.arange(0))
+    cfg = FitConfig(steps=12, batch_rays=256, plane_res=16, plane_channels=4, occ_warmup=4, background="white")
+    hull = torch.ones(64, 64, 64, dtype=torch.bool)
+    decoder = load_decoder()
+    codes = {(name, rb): fit(p, decoder, replace(cfg, random_background=rb), hull=hull).codes
+             for name, p in (("cover", posed), ("none", replace(posed, alpha=None))) for rb in (False, True)}
+    assert not np.array_equal(codes["cover", True], codes["cover", False])
+    assert np.array_equal(codes["none", True], codes["none", False])

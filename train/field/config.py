@@ -41,6 +41,9 @@ class FitConfig:
     fg_fraction: float = config_field(0.75, "share of each batch drawn from rays that see the object (when masks exist)")
     tv_weight: float = config_field(1e-4, "total-variation weight on the planes")
     empty_weight: float = config_field(1.0, "weight of the density penalty at random points outside the visual hull")
+    random_background: bool = config_field(False, "train each ray over a random colour, its target recomposited by the "
+                                                   "images' coverage, so that a haze where they are clear costs (needs "
+                                                   "coverage: masks or RGBA; the object-alone step always does)")
     seed: int = config_field(0, "random seed")
     decoder: str = config_field(formats.DECODER_VERSION, "shared decoder version to fit for: "
                                 + ", ".join(formats.DECODERS) + " (docs/fitting.md)")

@@ -34,22 +34,26 @@ def render_with_model(planes: torch.Tensor, decoder, background, samples: int, p
 
 
 def evaluate_planes(planes: np.ndarray, decoder, posed: PosedImages, views=None, background=None, samples: int = 24,
-                    masks: np.ndarray | None = None) -> dict:
+                    masks: np.ndarray | None = None, with_ssim: bool = True) -> dict:
     """Render the test views (default `posed.test`) from planes (3, C, R, R) float32; mean PSNR/SSIM. With
     `background` (an OuterField and its `samples` per segment): rendered in front of it and scored on the pixels
     of `masks` (V, H, W) bool, by default where these planes' opacity >= OBJECT_OPACITY (returned as "masks");
-    its field_ssim is then the whole view's, background included."""
+    its field_ssim is then the whole view's, background included. `with_ssim` False: no field_ssim (a PSNR-only
+    score, as the print budget's predictions need)."""
     views = posed.test if views is None else views
     device = next(decoder.parameters()).device
     p = torch.from_numpy(planes).to(device)
     gt = posed.images[views]
     if background is None:
         pred = render_views(p, decoder, posed.box, posed.c2w[views], posed.intrinsics[views], posed.width, posed.height)
-        return {"field_psnr": float(np.mean([psnr(a, g) for a, g in zip(pred, gt)])),
-                "field_ssim": float(np.mean([ssim(a, g) for a, g in zip(pred, gt)])), "renders": pred}
+        return {"field_psnr": float(np.mean([psnr(a, g) for a, g in zip(pred, gt)])), "renders": pred,
+                **_ssim(pred, gt, with_ssim)}
     pred, acc = render_with_model(p, decoder, background, samples, posed, views)
     masks = acc >= OBJECT_OPACITY if masks is None else masks
     scores = [-10 * np.log10(max(float(((a - g) ** 2)[m].mean()), 1e-10)) if m.any() else 0.0
               for a, g, m in zip(pred, gt, masks)]
-    return {"field_psnr": float(np.mean(scores)), "field_ssim": float(np.mean([ssim(a, g) for a, g in zip(pred, gt)])),
-            "renders": pred, "masks": masks}
+    return {"field_psnr": float(np.mean(scores)), "renders": pred, "masks": masks, **_ssim(pred, gt, with_ssim)}
+
+
+def _ssim(pred: np.ndarray, gt: np.ndarray, wanted: bool) -> dict:
+    return {"field_ssim": float(np.mean([ssim(a, g) for a, g in zip(pred, gt)]))} if wanted else {}

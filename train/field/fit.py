@@ -23,7 +23,7 @@ from .channel_fit import through_channel
 from .config import FitConfig, check_fit_config
 from .field import TriPlanes, decode, sample_planes, straight_through_8bit
 from .occupancy import OccupancyGrid
-from .rays import RayBank, make_rays
+from .rays import RayBank, make_rays, recomposite
 from .render import density_fn, render_rays
 from .sampler import BoxFrame
 
@@ -143,7 +143,7 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     if st.bg_opt is not None:
         for g in st.bg_opt.param_groups:
             g["lr"] = lr_at(cfg, st.step) * cfg.background_lr / cfg.lr
-    o, d, target, view = st.bank.batch(cfg.batch_rays, cfg.fg_fraction, gen)
+    o, d, target, view, cover = st.bank.batch(cfg.batch_rays, cfg.fg_fraction, gen)
     move_poses = st.poses is not None and st.step >= cfg.steps * cfg.pose_start
     if st.poses is not None:
         for g in st.pose_opt.param_groups:
@@ -168,8 +168,12 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
         color, n_samples, bg_terms = render_and_regularise(planes, decoder, st.frame, occ, st.background, cfg, o, d,
                                                            target, gen)
     else:
+        behind = formats.BACKGROUND
+        if cfg.random_background and cover is not None:   # a haze where the target is clear shows over a colour
+            behind = torch.rand(o.shape[0], 3, generator=gen).to(o.device)
+            target = recomposite(target, cover, behind, formats.BACKGROUND)
         color, _, n_samples = render_rays(planes, decoder, st.frame, occ, o, d, jitter=True, generator=gen,
-                                          min_transmittance=cfg.min_transmittance)
+                                          min_transmittance=cfg.min_transmittance, background=behind)
     st.samples += n_samples
     mse = torch.mean((color - target) ** 2)
     loss = mse + cfg.tv_weight * _tv(st.planes.planes) if cfg.tv_weight else mse

@@ -36,7 +36,7 @@ REACH = 1           # cells sideways
 KEEP_SHARE = 0.05   # connected pieces smaller than this share of the largest are floaters
 NEAR = 2            # cells the object's cells are grown by
 TEACHER_SIZE = 400  # longer side, pixels, of the views the planes are fitted to (the capture's when smaller)
-DISTIL_LR = 0.01    # the planes' learning rate then, at the first step
+DISTIL_LR = 0.03    # the planes' learning rate then, at the first step
 
 
 def object_cells(alpha: np.ndarray, solid: float = SOLID, floor_band: float = FLOOR_BAND, above: float = ABOVE,
@@ -71,20 +71,22 @@ def object_views(planes, decoder, posed: PosedImages):
     is solid."""
     import torch
 
-    from .render import cell_alpha, occupancy_from_planes, render_views
+    from .render import cell_alpha, occupancy_from_planes, render_pixels, render_rays
     from .sampler import BoxFrame
 
     box = np.asarray(posed.box, np.float32)
     keep = torch.from_numpy(object_cells(cell_alpha(planes, decoder, box, formats.OCC_RES))).to(planes.device)
     if not bool(keep.any()):
         return None
-    occ = occupancy_from_planes(planes, decoder, BoxFrame.from_box(box, planes.device)) & keep
+    frame = BoxFrame.from_box(box, planes.device)
+    occ = occupancy_from_planes(planes, decoder, frame) & keep
     tr = posed.train
     scale = min(1.0, TEACHER_SIZE / max(posed.width, posed.height))
     w, h = max(1, round(posed.width * scale)), max(1, round(posed.height * scale))
     intrinsics = (posed.intrinsics[tr] * np.float32(scale)).astype(np.float32)
-    views = render_views(planes, decoder, box, posed.c2w[tr], intrinsics, w, h, occ=occ)
-    return PosedImages(images=views, alpha=(np.abs(views - 1).max(-1) > 0.01).astype(np.float32), c2w=posed.c2w[tr],
+    views, cover = render_pixels(lambda o, d: render_rays(planes, decoder, frame, occ, o, d)[:2], frame, posed.c2w[tr],
+                                 intrinsics, w, h)
+    return PosedImages(images=views, alpha=np.clip(cover, 0.0, 1.0), c2w=posed.c2w[tr],
                        intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
                        name=posed.name), keep
 
@@ -93,5 +95,6 @@ def object_config(cfg):
     """The FitConfig of the fit to `object_views`: round(cfg.steps * cfg.object_steps) steps over white, from
     DISTIL_LR down to cfg's last learning rate, the poses as they are."""
     steps = max(1, round(cfg.steps * cfg.object_steps))
-    return replace(cfg, steps=steps, background="white", refine_poses="off", object_steps=0.0, lr=DISTIL_LR,
+    return replace(cfg, steps=steps, background="white", refine_poses="off", object_steps=0.0, random_background=True,
+                   lr=DISTIL_LR,
                    lr_final=min(cfg.lr_final, DISTIL_LR), occ_warmup=max(1, steps // 10))
