@@ -94,7 +94,7 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
         from .pose_refine import PoseRefine
         poses = PoseRefine(len(posed.train)).to(device)
         pose_opt = torch.optim.Adam(poses.parameters(), lr=cfg.pose_lr)
-    return FitState(planes, occ, frame, make_rays(posed, posed.train, frame).to(device), opt,
+    return FitState(planes, occ, frame, make_rays(posed, posed.train, frame, cfg.random_background).to(device), opt,
                     channel=new_state_channel(cfg, device), background=bg, bg_opt=bg_opt, poses=poses,
                     pose_opt=pose_opt)
 

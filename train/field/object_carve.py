@@ -92,8 +92,9 @@ def object_views(planes, decoder, posed: PosedImages):
 
 
 def object_config(cfg):
-    """The FitConfig of the fit to `object_views`: round(cfg.steps * cfg.object_steps) steps over white, from
-    DISTIL_LR down to cfg's last learning rate, the poses as they are."""
+    """The FitConfig of the fit to `object_views`: round(cfg.steps * cfg.object_steps) steps, each ray over a
+    random colour (its target recomposited by the views' opacity), from DISTIL_LR down to cfg's last learning rate,
+    the poses as they are."""
     steps = max(1, round(cfg.steps * cfg.object_steps))
     return replace(cfg, steps=steps, background="white", refine_poses="off", object_steps=0.0, random_background=True,
                    lr=DISTIL_LR,

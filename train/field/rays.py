@@ -62,8 +62,10 @@ def view_rays(c2w: np.ndarray, intr: np.ndarray, width: int, height: int, frame:
     return frame.rays_to_q(torch.from_numpy(o).to(dev), torch.from_numpy(d).to(dev))
 
 
-def make_rays(posed: PosedImages, views: np.ndarray, frame: BoxFrame) -> RayBank:
-    os_, ds, cs, vs, fgs, als = [], [], [], [], [], []
+def make_rays(posed: PosedImages, views: np.ndarray, frame: BoxFrame, keep_alpha: bool = False) -> RayBank:
+    """The bank of `views`' pixels; their coverage kept per ray only with `keep_alpha` (a fit over random
+    colours needs it; others only need the foreground's indices)."""
+    os_, ds, cs, vs, als = [], [], [], [], []
     for j, i in enumerate(views):
         o, d = view_rays(posed.c2w[i], posed.intrinsics[i], posed.width, posed.height, frame)
         os_.append(o), ds.append(d), cs.append(torch.from_numpy(posed.images[i].reshape(-1, 3)))
@@ -72,4 +74,4 @@ def make_rays(posed: PosedImages, views: np.ndarray, frame: BoxFrame) -> RayBank
             als.append(torch.from_numpy(np.asarray(posed.alpha[i], np.float32).reshape(-1)))
     alpha = torch.cat(als) if als else None
     fg = torch.nonzero(alpha > 0.01).squeeze(1) if alpha is not None else None
-    return RayBank(torch.cat(os_), torch.cat(ds), torch.cat(cs), torch.cat(vs), fg, alpha)
+    return RayBank(torch.cat(os_), torch.cat(ds), torch.cat(cs), torch.cat(vs), fg, alpha if keep_alpha else None)
