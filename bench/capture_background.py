@@ -103,6 +103,9 @@ def _side_by_side(path: Path, scene, truth, photos: np.ndarray, renders: np.ndar
 def bench_fit_command(args) -> int:
     """`snapshot3d bench fit`: with --captures, this bench at CAPTURE_DEFAULTS (CAPTURE_QUICK with --quick);
     else `bench/fit.py`'s."""
+    if getattr(args, "representations", False):
+        from .representations import bench_representations_command
+        return bench_representations_command(args)
     if not getattr(args, "captures", False):
         from .fit import bench_fit_command as fit_command
         return fit_command(args)

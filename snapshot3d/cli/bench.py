@@ -70,7 +70,19 @@ def add_commands(sub) -> None:
     bf.add_argument("--captures", action="store_true", help="instead: issue 40's measures, bench capture-background "
                     "on spot and duck composites (no masks on white, with --background outer, masked)")
     bf.add_argument("--scenes", default="spot,lego", help="comma-separated bench scenes; a subset writes fit_<names>.*")
-    bf.add_argument("--merge", action="store_true", help="only combine fit_<scene>.json files into fit.*")
+    bf.add_argument("--merge", action="store_true", help="only combine fit_<scene>.json files into fit.* (with "
+                    "--representations: NAME_*.json into NAME.*)")
+    bf.add_argument("--representations", action="store_true", help="instead: tri-planes against a dense grid, a hash "
+                    "grid and a pure MLP at equal bytes (issue 37 item 2; writes fit_representations.*)")
+    bf.add_argument("--budgets-kb", default="4,16,64,160", help="with --representations: the byte budgets (kB)")
+    bf.add_argument("--kinds", default="triplane-shared,triplane,grid,hash,mlp",
+                    help="with --representations: the representations")
+    bf.add_argument("--rep-steps", type=int, default=1500, help="with --representations: fit steps")
+    bf.add_argument("--rep-rays", type=int, default=4096, help="with --representations: rays per step")
+    bf.add_argument("--rep-views", type=int, default=0, help="with --representations: held-out views scored (0: all)")
+    bf.add_argument("--rep-name", default="fit_representations", help="with --representations: results file name")
+    bf.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
+                    help="with --representations: where the fits run")
 
     bg = add(bsub, "capture-background", "synthetic captures (make-capture) fitted without masks on white, without "
                                          "masks with --background outer, and with the true masks: the object's PSNR "
