@@ -1,8 +1,10 @@
 """`snapshot3d bench fit --representations`: tri-planes against a dense grid, a hash grid and a pure MLP at equal
 bytes (issue 37 item 2), on the bench's scenes (spot and lego as `bench fit` loads them), `field_psnr` at their
-held-out views. Every field is fitted from scratch with the same rays, steps, occupancy grid and 8-bit ending
-(`train/field/rep_fit.py`); what each carries is counted at one byte per value (`representations.py`). Speed
-beside accuracy: each row's fit time and the median time to render one held-out view.
+held-out views. Every field is fitted from scratch with the same rays, steps, occupancy grid, regularisers and
+8-bit ending (`train/field/rep_fit.py`); what each carries is counted at one byte per value
+(`representations.py`). Speed beside accuracy: each row's fit time and time per held-out view on the device that
+fitted it, and the cost of one sample of the 8-bit field on this machine's CPU (`cpu_us_per_ksample`, measured
+for every row where the rows are written, so that rows fitted on different devices compare).
 
 Rows are kept per (scene, kind, budget) as they finish (`RowBlocks`), so a killed run resumes. `--merge`
 combines the NAME_*.json files of runs split over processes into NAME.*. Writes NAME.{csv,json,png}."""
@@ -96,14 +98,15 @@ def _with_cost(rows: list[dict]) -> list[dict]:
     return rows
 
 
-def _merge(out: Path, name: str) -> list[dict]:
+def _merge(out: Path, name: str) -> tuple[list[dict], list[str]]:
+    """The rows of every out/NAME_*.json (runs split over processes or machines; each row names its device)."""
     parts = sorted(p for p in out.glob(f"{name}_*.json"))
     if not parts:
         raise UserError(f"--merge: no {name}_*.json in {out}")
     rows = []
     for p in parts:
         rows += json.loads(p.read_text())["rows"]
-    return rows
+    return rows, [p.name for p in parts]
 
 
 def bench_representations_command(args) -> int:
@@ -114,8 +117,10 @@ def bench_representations_command(args) -> int:
     kinds = [k for k in args.kinds.split(",") if k]
     scenes = [s for s in args.scenes.split(",") if s]
     t0 = time.time()
+    parts = None
     if args.merge:
-        rows = _with_cost(_merge(out, name))
+        rows, parts = _merge(out, name)
+        rows = _with_cost(rows)
     else:
         from snapshot3d.train.field.representations import size_for_budget
         for kind in kinds:
@@ -134,7 +139,8 @@ def bench_representations_command(args) -> int:
                           f"({time.time() - t0:.0f} s)", flush=True)
         blocks.finish()
     rows = _with_cost(rows)
-    doc = write_report(out, name, rows, {"rows": rows, "seconds": round(time.time() - t0, 1)})
+    doc = write_report(out, name, rows, {"rows": rows, "seconds": round(time.time() - t0, 1),
+                                         **({"merged": parts} if parts else {})})
     _chart(doc["rows"], out / f"{name}.png")
     print(f"wrote {out / name}.csv, .json, .png")
     return 0
