@@ -21,8 +21,6 @@ from .fit import _load
 
 __all__ = ["bench_representations_command"]
 
-NAME = "fit_representations"
-
 
 def _rows(args, scene: str, kind: str, kb: float) -> list[dict]:
     import torch
@@ -120,7 +118,6 @@ def bench_representations_command(args) -> int:
     parts = None
     if args.merge:
         rows, parts = _merge(out, name)
-        rows = _with_cost(rows)
     else:
         from snapshot3d.train.field.representations import size_for_budget
         for kind in kinds:

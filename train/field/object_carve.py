@@ -71,7 +71,7 @@ def object_views(planes, decoder, posed: PosedImages):
     is solid."""
     import torch
 
-    from .render import cell_alpha, occupancy_from_planes, render_pixels, render_rays
+    from .render import cell_alpha, occupancy_from_planes, render_views
     from .sampler import BoxFrame
 
     box = np.asarray(posed.box, np.float32)
@@ -84,8 +84,7 @@ def object_views(planes, decoder, posed: PosedImages):
     scale = min(1.0, TEACHER_SIZE / max(posed.width, posed.height))
     w, h = max(1, round(posed.width * scale)), max(1, round(posed.height * scale))
     intrinsics = (posed.intrinsics[tr] * np.float32(scale)).astype(np.float32)
-    views, cover = render_pixels(lambda o, d: render_rays(planes, decoder, frame, occ, o, d)[:2], frame, posed.c2w[tr],
-                                 intrinsics, w, h)
+    views, cover = render_views(planes, decoder, box, posed.c2w[tr], intrinsics, w, h, occ=occ, with_opacity=True)
     return PosedImages(images=views, alpha=np.clip(cover, 0.0, 1.0), c2w=posed.c2w[tr],
                        intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
                        name=posed.name), keep

@@ -88,10 +88,12 @@ def render_pixels(ray_fn, frame: BoxFrame, c2w: np.ndarray, intrinsics: np.ndarr
 
 @torch.no_grad()
 def render_views(planes: Tensor, decoder, box, c2w: np.ndarray, intrinsics: np.ndarray, width: int,
-                 height: int, occ: Tensor | None = None, chunk: int = 8192, progress=None) -> np.ndarray:
-    """Views (N, H, W, 3) float32 RGB in [0, 1] for cameras c2w (N, 4, 4) OpenGL, intrinsics (N, 4)."""
+                 height: int, occ: Tensor | None = None, chunk: int = 8192, progress=None, with_opacity: bool = False):
+    """Views (N, H, W, 3) float32 RGB in [0, 1] for cameras c2w (N, 4, 4) OpenGL, intrinsics (N, 4); with
+    `with_opacity`, also their opacity (N, H, W) float32."""
     frame = BoxFrame.from_box(box, planes.device)
     if occ is None:
         occ = occupancy_from_planes(planes, decoder, frame)
-    return render_pixels(lambda o, d: render_rays(planes, decoder, frame, occ, o, d)[:2], frame, c2w, intrinsics,
-                         width, height, chunk, progress)[0]
+    rgb, acc = render_pixels(lambda o, d: render_rays(planes, decoder, frame, occ, o, d)[:2], frame, c2w, intrinsics,
+                             width, height, chunk, progress)
+    return (rgb, acc) if with_opacity else rgb
