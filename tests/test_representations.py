@@ -21,6 +21,7 @@ def test_each_kind_fills_its_budget_and_carries_what_it_counts(kind, kb):
     assert carried_bytes(field) == size.carried
     sigma, rgb = field(torch.rand(50, 3) * 2 - 1, True)
     assert sigma.shape == (50,) and rgb.shape == (50, 3)
+    assert field(torch.zeros(0, 3), True)[0].shape == (0,)   # a chunk of rays with no samples in occupied cells
     assert bool((sigma >= 0).all()) and bool(((rgb >= 0) & (rgb <= 1)).all())
 
 

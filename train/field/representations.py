@@ -207,7 +207,7 @@ class RepField(nn.Module):
         idx = idx + (torch.arange(len(self.level_res), device=pts.device) * tables.shape[1])[None, :, None]
         wt = torch.where(corners.bool()[None, None], w[:, :, None, :], 1 - w[:, :, None, :]).prod(-1)  # (N, L, 8)
         feat = tables.reshape(-1, tables.shape[2])[idx]                                   # (N, L, 8, F)
-        return (feat * wt[..., None]).sum(2).reshape(len(pts), -1)
+        return (feat * wt[..., None]).sum(2).reshape(len(pts), tables.shape[0] * tables.shape[2])
 
     def forward(self, pts: Tensor, quant: bool = False) -> tuple[Tensor, Tensor]:
         if self.size.kind == "triplane-shared":
