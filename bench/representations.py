@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import time
+from functools import lru_cache
 from pathlib import Path
 
 from snapshot3d.errors import UserError
@@ -22,6 +23,12 @@ from .fit import _load
 __all__ = ["bench_representations_command"]
 
 
+@lru_cache(maxsize=1)
+def _scene(name: str):
+    """The bench scene `name` as `bench fit` loads it, once for all the rows of a scene."""
+    return _load(name)[0]
+
+
 def _rows(args, scene: str, kind: str, kb: float) -> list[dict]:
     import torch
 
@@ -30,7 +37,7 @@ def _rows(args, scene: str, kind: str, kb: float) -> list[dict]:
     from snapshot3d.train.field.rep_fit import RepFitConfig, evaluate_representation, fit_representation
 
     device = resolve_device(args.device)
-    posed, _ = _load(scene)
+    posed = _scene(scene)
     cfg = RepFitConfig(steps=args.rep_steps, batch_rays=args.rep_rays)
     field, info = fit_representation(posed, kind, int(kb * 1000), cfg, load_decoder().to(device), device)
     views = posed.test[:args.rep_views] if args.rep_views else posed.test

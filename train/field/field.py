@@ -14,7 +14,7 @@ from torch import Tensor, nn
 
 from snapshot3d import formats
 
-__all__ = ["sample_planes", "decode", "composite", "TriPlanes", "Decoder", "straight_through_8bit"]
+__all__ = ["sample_planes", "decode", "activate", "composite", "TriPlanes", "Decoder", "straight_through_8bit"]
 
 _AXES = torch.tensor(formats.PLANE_AXES)
 
@@ -32,9 +32,12 @@ def decode(features: Tensor, decoder: "Decoder") -> tuple[Tensor, Tensor]:
     n, _, c = features.shape
     w0 = decoder.l0.weight.view(-1, 3, formats.C_MAX)[:, :, :c].reshape(-1, 3 * c)  # unused channels read 0
     h = F.relu(F.linear(features.reshape(n, 3 * c), w0, decoder.l0.bias))
-    out = decoder.tail(h)
-    sigma = torch.exp(torch.clamp(out[:, 0], max=formats.DENSITY_CLAMP))
-    return sigma, torch.sigmoid(out[:, 1:4])
+    return activate(decoder.tail(h))
+
+
+def activate(out: Tensor) -> tuple[Tensor, Tensor]:
+    """(N, 4) density logit and rgb logits -> density sigma (N,) >= 0 (exp, clamped), rgb (N, 3) in [0, 1]."""
+    return torch.exp(torch.clamp(out[:, 0], max=formats.DENSITY_CLAMP)), torch.sigmoid(out[:, 1:4])
 
 
 def composite(sigma: Tensor, rgb: Tensor, delta: float | Tensor, background: float = formats.BACKGROUND):

@@ -21,13 +21,13 @@ from snapshot3d.scene import dequantize_planes, quantize_planes
 
 from .channel_fit import through_channel
 from .config import FitConfig, check_fit_config
-from .field import TriPlanes, decode, sample_planes, straight_through_8bit
+from .field import TriPlanes, straight_through_8bit
 from .occupancy import OccupancyGrid
 from .rays import RayBank, make_rays, recomposite
 from .render import density_fn, render_rays
 from .sampler import BoxFrame
 
-__all__ = ["FitConfig", "FitState", "new_state", "train_step", "fit", "FitResult"]
+__all__ = ["FitConfig", "FitState", "new_state", "train_step", "fit", "FitResult", "empty_alpha"]
 
 
 @dataclass
@@ -116,15 +116,15 @@ def _tv(p: torch.Tensor) -> torch.Tensor:
     return ((p[..., 1:, :] - p[..., :-1, :]) ** 2).mean() + ((p[..., :, 1:] - p[..., :, :-1]) ** 2).mean()
 
 
-def _empty_alpha(planes, decoder, st: FitState, n: int, gen: torch.Generator) -> torch.Tensor:
-    """Mean one-step alpha at random points outside the visual hull: the planes must be empty there by
-    themselves, since the decode side computes its occupancy from the planes alone."""
-    pts = (torch.rand(n, 3, generator=gen) * 2 - 1).to(st.frame.centre.device)
-    g = st.occ.hull.shape[0]
+def empty_alpha(density, hull: torch.Tensor, frame: BoxFrame, n: int, gen: torch.Generator) -> torch.Tensor:
+    """Mean one-step alpha of `density(points (M, 3)) -> (M,)` at random points outside the visual hull
+    (G, G, G) bool: a field must be empty there by itself, since the decode side computes its occupancy from
+    the field alone."""
+    pts = (torch.rand(n, 3, generator=gen) * 2 - 1).to(frame.centre.device)
+    g = hull.shape[0]
     cell = ((pts + 1) * 0.5 * g).long().clamp(0, g - 1)
-    pts = pts[~st.occ.hull[cell[:, 0], cell[:, 1], cell[:, 2]]]
-    sigma = decode(sample_planes(planes, pts), decoder)[0]
-    return torch.mean(1 - torch.exp(-sigma * st.frame.step))
+    sigma = density(pts[~hull[cell[:, 0], cell[:, 1], cell[:, 2]]])
+    return torch.mean(1 - torch.exp(-sigma * frame.step))
 
 
 def lr_at(cfg: FitConfig, step: int) -> float:
@@ -180,7 +180,8 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     if bg_terms is not None:
         loss = loss + bg_terms
     if cfg.empty_weight and st.occ.outside_hull:
-        loss = loss + cfg.empty_weight * _empty_alpha(planes, decoder, st, cfg.batch_rays // 2, gen)
+        loss = loss + cfg.empty_weight * empty_alpha(density_fn(planes, decoder), st.occ.hull, st.frame,
+                                                     cfg.batch_rays // 2, gen)
     st.opt.zero_grad(set_to_none=True)
     if extra_params_opt is not None:
         extra_params_opt.zero_grad(set_to_none=True)

@@ -12,7 +12,7 @@ largest's size; then grown by NEAR cells, so that the object's soft edge stays, 
 beyond what stands there. `object_views` renders the training
 views of the fitted planes with every other cell skipped, over white, and fits the planes to those views (from where
 they are, DISTIL_LR) with the object's cells as their hull: the rays skip the other cells and the empty-space
-penalty (`fit._empty_alpha`) drives their density to zero, so that the decode side, which finds its occupancy from
+penalty (`fit.empty_alpha`) drives their density to zero, so that the decode side, which finds its occupancy from
 the planes alone, sees them empty too (`fit.fit` runs that fit). Fitting them with the cells cut while still
 against the photos instead lost the legs and 3 to 4 dB on spot (docs/capture.md).
 """

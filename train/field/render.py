@@ -13,7 +13,7 @@ from .field import composite, decode, sample_planes
 from .rays import view_rays
 from .sampler import BoxFrame, march
 
-__all__ = ["render_rays", "render_views", "occupancy_from_planes", "density_fn", "cell_alpha", "render_pixels"]
+__all__ = ["render_rays", "composite_samples", "render_views", "occupancy_from_planes", "density_fn", "cell_alpha", "render_pixels"]
 
 
 def density_fn(planes: Tensor, decoder):
@@ -61,11 +61,19 @@ def render_rays(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor | None, o:
             trans = torch.exp(-(torch.cumsum(tau, dim=1) - tau))
             keep = trans[ray, idx] > min_transmittance
         ray, idx, unit = ray[keep], idx[keep], unit[keep]
-    sigma_s, rgb_s = decode(sample_planes(planes, unit), decoder)
-    sigma = torch.zeros(s.n_rays, s.width, device=o.device).index_put((ray, idx), sigma_s)
-    rgb = torch.zeros(s.n_rays, s.width, 3, device=o.device).index_put((ray, idx), rgb_s)
-    color, acc, weights = composite(sigma, rgb, frame.step, background)
+    color, acc, weights = composite_samples(s, ray, idx, *decode(sample_planes(planes, unit), decoder), frame.step,
+                                            background)
     return (color, acc, int(ray.shape[0])) + ((weights,) if with_weights else ())
+
+
+def composite_samples(s, ray: Tensor, idx: Tensor, sigma_s: Tensor, rgb_s: Tensor, step: float,
+                      background: float | Tensor = formats.BACKGROUND):
+    """Kept samples' density (M,) and rgb (M, 3) at `ray`, `idx` (M,) of a march `s` (`sampler.Samples`), laid
+    into its dense (N, S) grid and composited: colour (N, 3) over `background`, opacity (N,), weights (N, S)."""
+    dev = sigma_s.device
+    sigma = torch.zeros(s.n_rays, s.width, device=dev).index_put((ray, idx), sigma_s)
+    rgb = torch.zeros(s.n_rays, s.width, 3, device=dev).index_put((ray, idx), rgb_s)
+    return composite(sigma, rgb, step, background)
 
 
 @torch.no_grad()

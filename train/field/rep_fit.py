@@ -12,15 +12,13 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from snapshot3d import formats
 from snapshot3d.metrics import psnr
 from snapshot3d.posed import PosedImages
 
-from .field import composite
-from .fit import hull_grid
+from .fit import empty_alpha, hull_grid
 from .occupancy import OccupancyGrid
 from .rays import make_rays
-from .render import render_pixels
+from .render import composite_samples, render_pixels
 from .representations import RepField, build_field, carried_bytes
 from .sampler import BoxFrame, march
 
@@ -45,21 +43,7 @@ class RepFitConfig:
 def render_field(field: RepField, frame: BoxFrame, occ, o, d, quant: bool, jitter: bool = False, gen=None):
     """q-space rays (N, 3) -> colour (N, 3) over white, opacity (N,)."""
     s = march(o, d, frame, occ, jitter=jitter, generator=gen)
-    sigma_s, rgb_s = field(s.unit, quant)
-    sigma = torch.zeros(s.n_rays, s.width, device=o.device).index_put((s.ray, s.idx), sigma_s)
-    rgb = torch.zeros(s.n_rays, s.width, 3, device=o.device).index_put((s.ray, s.idx), rgb_s)
-    color, acc, _ = composite(sigma, rgb, frame.step, formats.BACKGROUND)
-    return color, acc
-
-
-def _empty_alpha(field: RepField, occ: OccupancyGrid, frame: BoxFrame, n: int, quant: bool, gen) -> torch.Tensor:
-    """Mean one-step alpha at random points outside the visual hull (`fit._empty_alpha` for any field): a field
-    must be empty there by itself, since a decode computes its occupancy from the field alone."""
-    pts = (torch.rand(n, 3, generator=gen) * 2 - 1).to(frame.centre.device)
-    g = occ.hull.shape[0]
-    cell = ((pts + 1) * 0.5 * g).long().clamp(0, g - 1)
-    sigma = field(pts[~occ.hull[cell[:, 0], cell[:, 1], cell[:, 2]]], quant)[0]
-    return torch.mean(1 - torch.exp(-sigma * frame.step))
+    return composite_samples(s, s.ray, s.idx, *field(s.unit, quant), frame.step)[:2]
 
 
 def fit_representation(posed: PosedImages, kind: str, budget: int, cfg: RepFitConfig, decoder=None, device=None,
@@ -87,7 +71,8 @@ def fit_representation(posed: PosedImages, kind: str, budget: int, cfg: RepFitCo
         losses.append(float(mse.detach()))
         loss = mse + cfg.tv_weight * field.tv()
         if cfg.empty_weight and occ.outside_hull:
-            loss = loss + cfg.empty_weight * _empty_alpha(field, occ, frame, cfg.batch_rays // 2, quant, gen)
+            loss = loss + cfg.empty_weight * empty_alpha(lambda p: field(p, quant)[0], occ.hull, frame,
+                                                         cfg.batch_rays // 2, gen)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()

@@ -26,7 +26,7 @@ from torch import Tensor, nn
 from snapshot3d import formats
 from snapshot3d.errors import UserError
 
-from .field import decode, sample_planes
+from .field import activate, decode, sample_planes
 
 __all__ = ["KINDS", "RepSize", "size_for_budget", "RepField", "build_field", "quantize_st", "carried_bytes"]
 
@@ -116,10 +116,6 @@ class _Head(nn.Module):
             if i < len(self.layers) - 1:
                 x = F.relu(x)
         return x
-
-
-def _activate(out: Tensor) -> tuple[Tensor, Tensor]:
-    return torch.exp(torch.clamp(out[:, 0], max=formats.DENSITY_CLAMP)), torch.sigmoid(out[:, 1:4])
 
 
 def _hash_index(corner: Tensor, res: int, table: int) -> Tensor:
@@ -213,7 +209,7 @@ class RepField(nn.Module):
         if self.size.kind == "triplane-shared":
             v = self.values if not quant else quantize_st(self.values)
             return decode(sample_planes(v, pts), self.decoder)
-        return _activate(self.head(self.features(pts, quant), quant))
+        return activate(self.head(self.features(pts, quant), quant))
 
 
 def build_field(kind: str, budget: int, seed: int = 0, decoder=None) -> RepField:
