@@ -114,13 +114,33 @@ def _merge(out: Path, name: str) -> tuple[list[dict], list[str]]:
     return rows, [p.name for p in parts]
 
 
+def _checked(args) -> tuple[list[float], list[str], list[str]]:
+    """The budgets (kB), kinds and scenes asked for; UserError naming the first option that is wrong."""
+    from .fit import BENCH_SCENES
+
+    try:
+        budgets = [float(x) for x in args.budgets_kb.split(",") if x]
+    except ValueError:
+        raise UserError(f"--budgets-kb must be numbers of kB separated by commas, not {args.budgets_kb!r}") from None
+    kinds = [k for k in args.kinds.split(",") if k]
+    scenes = [s for s in args.scenes.split(",") if s]
+    unknown = [s for s in scenes if s not in BENCH_SCENES]
+    if unknown:
+        raise UserError(f"--scenes: unknown bench scene {unknown[0]!r} (choose from {', '.join(BENCH_SCENES)})")
+    for opt, value, least in (("--rep-steps", args.rep_steps, 1), ("--rep-rays", args.rep_rays, 1),
+                              ("--rep-views", args.rep_views, 0)):
+        if value < least:
+            raise UserError(f"{opt} must be >= {least}, not {value}")
+    if not (budgets and kinds and scenes) or not all(b > 0 for b in budgets):
+        raise UserError("--budgets-kb, --kinds and --scenes must each name at least one, budgets above 0")
+    return budgets, kinds, scenes
+
+
 def bench_representations_command(args) -> int:
     if args.quick:   # a smoke run: one small field per kind on spot
         args.scenes, args.budgets_kb, args.rep_steps, args.rep_rays, args.rep_views = "spot", "4", 20, 512, 1
     out, name = Path(args.out), args.rep_name
-    budgets = [float(x) for x in args.budgets_kb.split(",") if x]
-    kinds = [k for k in args.kinds.split(",") if k]
-    scenes = [s for s in args.scenes.split(",") if s]
+    budgets, kinds, scenes = _checked(args)
     t0 = time.time()
     parts = None
     if args.merge:

@@ -46,6 +46,10 @@ def test_refused_in_one_line():
         size_for_budget("grid", 500)
     r = run_cli("bench", "fit", "--representations", "--kinds", "triplane,octree", "--out", "/nonexistent/x")
     assert_one_line_error(r, "unknown representation 'octree'")
+    for args, cause in ((["--budgets-kb", "abc"], "--budgets-kb must be numbers"), (["--scenes", "nope"], "unknown bench "
+                        "scene 'nope'"), (["--rep-steps", "0"], "--rep-steps must be >= 1, not 0"),
+                        (["--budgets-kb", "-4"], "budgets above 0")):
+        assert_one_line_error(run_cli("bench", "fit", "--representations", *args, "--out", "/nonexistent/x"), cause)
 
 
 @pytest.mark.parametrize("kind,steps,gain", [("triplane", 60, 1.5), ("grid", 60, 1.5), ("mlp", 60, 0.5), ("hash", 40, 0.5)])
