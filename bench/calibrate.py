@@ -97,8 +97,9 @@ def twin_mtf50(preset, seed: int, truth: dict) -> float:
     return predicted_mtf50(photo_linear(twin, scan_image(twin, chart=True).fit), truth)
 
 
-def _chart_places(lay) -> np.ndarray:
-    """(N, K) bool: the layout's chips whose coefficient lies inside the chart's carrier squares."""
+def _chart_places(lay, boxes=None) -> np.ndarray:
+    """(N, K) bool: the layout's chips whose coefficient lies inside `boxes` (snapshot pixel boxes (x0, y0, x1,
+    y1); default the chart's two carrier squares)."""
     from snapshot3d.codecs import bands
     from snapshot3d.scanner import chart
 
@@ -106,10 +107,26 @@ def _chart_places(lay) -> np.ndarray:
     for b in lay.bands:
         f = 2 ** int(b[-3])
         m = np.zeros(bands.band_shape(b, chart.N), bool)
-        for x0, y0, x1, y1 in chart.CARRIER_BOXES:
+        for x0, y0, x1, y1 in chart.CARRIER_BOXES if boxes is None else boxes:
             m[(y0 + f - 1) // f:y1 // f, (x0 + f - 1) // f:x1 // f] = True
         masks.append(m.ravel())
     return np.concatenate(masks)[lay.chips]
+
+
+def _square_weights(cap: np.ndarray, names) -> np.ndarray:
+    """(squares, bands): how much the print codec's matched filters weigh each carrier square in each band of
+    `names`: the sum of 1/n^2 over the band's coefficients there (a chip's filter times carrier, q w, goes as
+    1/n^2 for n the print noise model `band_noise` of the capture (380, 380, 3) uint8 RGB)."""
+    from snapshot3d.codecs.print_carriers import band_noise
+    from snapshot3d.scanner import chart
+
+    model = band_noise(cap / 255.0)
+    out = np.zeros((len(chart.CARRIER_BOXES), len(names)))
+    for j, b in enumerate(names):
+        f = 2 ** int(b[-3])
+        for i, (x0, y0, x1, y1) in enumerate(chart.CARRIER_BOXES):
+            out[i, j] = float(np.sum(model[b][y0 // f:y1 // f, x0 // f:x1 // f] ** -2.0))
+    return out
 
 
 def _carrier_response(cap: np.ndarray, snap: np.ndarray, lay, keep: np.ndarray) -> dict:
@@ -145,28 +162,52 @@ def _carrier_response(cap: np.ndarray, snap: np.ndarray, lay, keep: np.ndarray) 
             "band_gain": dict(zip(lay.bands, gain.tolist())), "band_unit": dict(zip(lay.bands, unit.tolist()))}
 
 
-def codec_reference(preset, seed: int, rng) -> dict:
+def _mean(parts: list[dict]) -> dict:
+    """The mean of `_carrier_response` results (numbers and band -> number dicts) over draws."""
+    return {k: ({b: float(np.mean([p[k][b] for p in parts])) for b in v} if isinstance(v, dict)
+                else float(np.mean([p[k] for p in parts]))) for k, v in parts[0].items()}
+
+
+def codec_reference(preset, seed: int, rng, draws: int = 3) -> dict:
     """The simulator's own channel through `preset`/`seed` as the print codec sees it at the chart's operating
     point: random 16x4 planes embedded in a flat mid grey (no host texture) at the chart's carrier amplitude
-    (`chart.CARRIER_STD`), photographed with the same seed (the same print, pose, light and camera draws).
-    Returns {"places": ..., "square": ..., "pilots": ...}: the carriers' response (`_carrier_response`: gain
-    and unit noise over all bands and per band) at the chart's places (their chips inside the carrier
-    squares) and over the whole square, and the pilots' `print_channel.measure` (gain, unit)."""
-    from snapshot3d.codecs.print_carriers import print_layout
+    (`chart.CARRIER_STD`), photographed with the same seed (the same print, pose, light and camera draws), for
+    `draws` draws of the planes (one draw's gains move by up to 10 % with the planes at `severe`).
+    Returns, each the mean over the draws:
+    - "expected": per band the gain the codec's carriers read at the chart's places, each carrier square's own
+      gain (`squares`, the carriers' chips inside it) weighed as the codec's filters weigh the square
+      (`_square_weights`), and over all bands (`gain`) the same with each band weighed by its energy too.
+      This is the target's reference: at `severe` the two squares' gains differ by up to 5x, and one
+      least-squares fit over the carriers weighs the squares by which carriers drew large values;
+    - "places": the carriers' response (`_carrier_response`: gain and unit noise over all bands and per band)
+      over both squares' chips; "square": the same over the whole snapshot square;
+    - "pilots": the pilots' `print_channel.measure` (gain, unit)."""
+    from snapshot3d.codecs.print_carriers import PRINT_BANDS, print_layout
     from snapshot3d.codecs.print_channel import measure
     from snapshot3d.codecs.print_embed import embed
     from snapshot3d.scanner import chart
     from snapshot3d.scanner.qr import SheetMeta
     from snapshot3d.scanner.roundtrip import capture
 
-    planes = np.clip(rng.normal(0, 0.4, (3, 4, 16, 16)), -1, 1)
-    snap = embed(np.full((380, 380, 3), 0.5), planes, host_psnr=-20 * np.log10(chart.CARRIER_STD))
-    cap = capture(snap, SheetMeta(codec="print-2", planes=(16, 4)), preset, seed)
     lay = print_layout(16, 4)
-    ch = measure(snap, cap, 16, 4)
-    return {"places": _carrier_response(cap, snap, lay, _chart_places(lay)),
-            "square": _carrier_response(cap, snap, lay, np.ones(lay.chips.shape, bool)),
-            "pilots": {"gain": ch.gain, "unit": ch.unit}}
+    keeps = [_chart_places(lay, (box,)) for box in chart.CARRIER_BOXES]
+    places, square, pilots, per_sq, weights = [], [], [], [], []
+    for _ in range(draws):
+        planes = np.clip(rng.normal(0, 0.4, (3, 4, 16, 16)), -1, 1)
+        snap = embed(np.full((380, 380, 3), 0.5), planes, host_psnr=-20 * np.log10(chart.CARRIER_STD))
+        cap = capture(snap, SheetMeta(codec="print-2", planes=(16, 4)), preset, seed)
+        places.append(_carrier_response(cap, snap, lay, _chart_places(lay)))
+        square.append(_carrier_response(cap, snap, lay, np.ones(lay.chips.shape, bool)))
+        ch = measure(snap, cap, 16, 4)
+        pilots.append({"gain": ch.gain, "unit": ch.unit})
+        per_sq.append([[_carrier_response(cap, snap, lay, k)["band_gain"][b] for b in lay.bands] for k in keeps])
+        weights.append(_square_weights(cap, list(lay.bands)))
+    g, w = np.mean(per_sq, 0), np.mean(weights, 0)   # (squares, bands)
+    ew = w * np.array([PRINT_BANDS[b] for b in lay.bands])   # over all bands as carriers: each band by its energy
+    expected = {"gain": float(np.sum(g * ew) / np.sum(ew)),
+                "band_gain": dict(zip(lay.bands, (np.sum(g * w, 0) / np.sum(w, 0)).tolist())),
+                "squares": {b: g[:, j].tolist() for j, b in enumerate(lay.bands)}}
+    return {"expected": expected, "places": _mean(places), "square": _mean(square), "pilots": _mean(pilots)}
 
 
 def bench_calibrate_command(args) -> int:
@@ -203,7 +244,10 @@ def bench_calibrate_command(args) -> int:
             if args.pilots:
                 ref = codec_reference(name, seed, rng)
                 pc = prof["print_channel"]
-                for tag, r in (("", ref["places"]), ("sq_", ref["square"])):
+                # band gains against the expected reading at the chart's places ("": the target), and against one
+                # least-squares fit over the carriers at the places (pl_, the reference before) and over the square
+                exp = {**ref["places"], **ref["expected"]}
+                for tag, r in (("", exp), ("pl_", ref["places"]), ("sq_", ref["square"])):
                     errs = {b: prof["bands"][b]["gain"] / max(g, 1e-9) - 1 for b, g in r["band_gain"].items()}
                     uerr = {b: prof["bands"][b]["unit"] / max(u, 1e-12) - 1 for b, u in r["band_unit"].items()}
                     row.update({f"{tag}bands_within_10pct": sum(abs(e) <= 0.10 for e in errs.values()),
@@ -212,7 +256,11 @@ def bench_calibrate_command(args) -> int:
                                 f"{tag}unit_err": round(pc["unit"] / r["unit"] - 1, 4),
                                 **{f"{tag}gain_err_{b}": round(e, 4) for b, e in errs.items()},
                                 **{f"{tag}unit_err_{b}": round(e, 4) for b, e in uerr.items()}})
-                row.update(print_gain=pc["gain"], print_unit=pc["unit"], ref_gain=round(ref["places"]["gain"], 4),
+                sq_err = [prof["bands"][b]["squares"][i] / max(g, 1e-9) - 1
+                          for b, gs in ref["expected"]["squares"].items() for i, g in enumerate(gs)]
+                row.update(squares_within_10pct=sum(abs(e) <= 0.10 for e in sq_err), squares_n=len(sq_err),
+                           squares_err_median_abs=round(float(np.median(np.abs(sq_err))), 4))
+                row.update(print_gain=pc["gain"], print_unit=pc["unit"], ref_gain=round(ref["expected"]["gain"], 4),
                            ref_unit=float(f'{ref["places"]["unit"]:.4g}'), pilot_gain=round(ref["pilots"]["gain"], 4),
                            pilot_unit=float(f'{ref["pilots"]["unit"]:.4g}'),
                            pilot_gain_err=round(pc["gain"] / ref["pilots"]["gain"] - 1, 4),
@@ -238,13 +286,15 @@ def bench_calibrate_command(args) -> int:
             def med(key):
                 return float(np.median([abs(x[k]) for x in r for k in x if k.startswith(key + "_")]))
 
-            for tag in ("", "sq_"):
+            for tag in ("", "pl_", "sq_"):
                 s.update({f"{tag}gain_within_10pct": frac(f"{tag}gain_err", 0.10),
                           f"{tag}unit_within_25pct": frac(f"{tag}unit_err", 0.25),
                           f"{tag}band_gains_within_10pct": frac(f"{tag}gain_err", 0.10, 7),
                           f"{tag}band_units_within_25pct": frac(f"{tag}unit_err", 0.25, 7),
                           f"{tag}band_gain_err_median_abs": med(f"{tag}gain_err"),
                           f"{tag}band_unit_err_median_abs": med(f"{tag}unit_err")})
+            s.update(square_band_gains_within_10pct=sum(x["squares_within_10pct"] for x in r)
+                                                            / sum(x["squares_n"] for x in r))
             s.update(pilot_gain_within_10pct=frac("pilot_gain_err", 0.10),
                      pilot_unit_within_25pct=frac("pilot_unit_err", 0.25),
                      pilot_gain_err_median=float(np.median([x["pilot_gain_err"] for x in r])),

@@ -166,6 +166,8 @@ def measure_bands(img: np.ndarray) -> dict:
     carrier's chip w goes as 1/sqrt(n) and its filter q as w/n, n the print noise model `band_noise` of the
     capture there; so a gain counts each coefficient by q w, 1/n^2, and a noise power by q^2, 1/n^3).
     Per band: `gain`, the weighted least-squares ratio of the capture's coefficients to the chart's;
+    `squares`, the same ratio in each carrier square (`chart.CARRIER_BOXES`; a tilted or unevenly focused photo
+    reads them apart);
     `noise`, the power per coefficient left ([0, 1]^2 units, unweighted); `unit`, the power left relative to
     the noise model (what `print_read.band_response` calls the noise). Over all bands: `print_channel`, the
     `print_channel.ChannelModel` fields (`gain`, `unit`: one reading over all bands' chips, as a carrier's),
@@ -201,7 +203,9 @@ def measure_bands(img: np.ndarray) -> dict:
         nb = sum(x.size for x in r2)
         pg = sum(float(np.sum(c * r)) for c, r, _ in ps) / max(sum(float(np.sum(r * r)) for _, r, _ in ps), 1e-30)
         raw = sum(float(np.sum((c - pg * r) ** 2)) for c, r, _ in ps)   # unweighted, as `noise` always was
-        out[b] = {"gain": round(gain[b], 4), "noise": float(f"{raw / nb:.4g}"), "unit": float(f"{rb / vb:.4g}")}
+        sq = [float(np.sum(c * r / n ** 2)) / max(float(np.sum(r * r / n ** 2)), 1e-30) for c, r, n in ps]
+        out[b] = {"gain": round(gain[b], 4), "noise": float(f"{raw / nb:.4g}"), "unit": float(f"{rb / vb:.4g}"),
+                  "squares": [round(x, 4) for x in sq]}
         rel += e * sum(float(np.sum((c - total_g * r) ** 2 / n ** 3)) for c, r, n in ps)
         var += e * vb
         res2 += raw
