@@ -27,6 +27,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from snapshot3d.errors import UserError
+
 from .common import PHYSICAL, write_report
 
 __all__ = ["chart_capture", "predicted_mtf50", "reference_mtf50", "twin_mtf50", "codec_reference",
@@ -172,13 +174,14 @@ def codec_reference(preset, seed: int, rng, draws: int = 3) -> dict:
     """The simulator's own channel through `preset`/`seed` as the print codec sees it at the chart's operating
     point: random 16x4 planes embedded in a flat mid grey (no host texture) at the chart's carrier amplitude
     (`chart.CARRIER_STD`), photographed with the same seed (the same print, pose, light and camera draws), for
-    `draws` draws of the planes (one draw's gains move by up to 10 % with the planes at `severe`).
+    `draws` draws of the planes (one draw's band gains spread by 1-6 % at `severe`, most in the chroma bands).
     Returns, each the mean over the draws:
     - "expected": per band the gain the codec's carriers read at the chart's places, each carrier square's own
       gain (`squares`, the carriers' chips inside it) weighed as the codec's filters weigh the square
       (`_square_weights`), and over all bands (`gain`) the same with each band weighed by its energy too.
       This is the target's reference: at `severe` the two squares' gains differ by up to 5x, and one
-      least-squares fit over the carriers weighs the squares by which carriers drew large values;
+      least-squares fit over the carriers weighs the squares by which carriers drew large values.
+      `band_gain_stderr`: its relative standard error over the draws;
     - "places": the carriers' response (`_carrier_response`: gain and unit noise over all bands and per band)
       over both squares' chips; "square": the same over the whole snapshot square;
     - "pilots": the pilots' `print_channel.measure` (gain, unit)."""
@@ -204,8 +207,11 @@ def codec_reference(preset, seed: int, rng, draws: int = 3) -> dict:
         weights.append(_square_weights(cap, list(lay.bands)))
     g, w = np.mean(per_sq, 0), np.mean(weights, 0)   # (squares, bands)
     ew = w * np.array([PRINT_BANDS[b] for b in lay.bands])   # over all bands as carriers: each band by its energy
+    each = np.sum(np.array(per_sq) * np.array(weights), 1) / np.sum(weights, 1)   # (draws, bands): each draw's reading
+    err = np.std(each, 0, ddof=1) / np.sqrt(draws) / np.mean(each, 0) if draws > 1 else np.full(len(lay.bands), np.nan)
     expected = {"gain": float(np.sum(g * ew) / np.sum(ew)),
                 "band_gain": dict(zip(lay.bands, (np.sum(g * w, 0) / np.sum(w, 0)).tolist())),
+                "band_gain_stderr": dict(zip(lay.bands, err.tolist())),
                 "squares": {b: g[:, j].tolist() for j, b in enumerate(lay.bands)}}
     return {"expected": expected, "places": _mean(places), "square": _mean(square), "pilots": _mean(pilots)}
 
@@ -214,6 +220,9 @@ def bench_calibrate_command(args) -> int:
     from snapshot3d.scanner.calibrate import calibrate_image
 
     t_start = time.perf_counter()
+    for opt in ("seeds", "draws"):
+        if getattr(args, opt, 1) < 1:
+            raise UserError(f"--{opt} must be at least 1, not {getattr(args, opt)}")
     if args.reference:
         seeds = range(100, 112)
         print("PRESET_REFERENCE = {")
@@ -242,7 +251,7 @@ def bench_calibrate_command(args) -> int:
                    "unit": prof["channel"]["unit"], "noise_std": prof["noise_std"],
                    "misregistration_px": prof["misregistration_px"], "calibrate_ms": round(ms, 1)}
             if args.pilots:
-                ref = codec_reference(name, seed, rng)
+                ref = codec_reference(name, seed, rng, args.draws)
                 pc = prof["print_channel"]
                 # band gains against the expected reading at the chart's places ("": the target), and against one
                 # least-squares fit over the carriers at the places (pl_, the reference before) and over the square
@@ -258,6 +267,7 @@ def bench_calibrate_command(args) -> int:
                                 **{f"{tag}unit_err_{b}": round(e, 4) for b, e in uerr.items()}})
                 sq_err = [prof["bands"][b]["squares"][i] / max(g, 1e-9) - 1
                           for b, gs in ref["expected"]["squares"].items() for i, g in enumerate(gs)]
+                row.update(ref_stderr_max=round(max(ref["expected"]["band_gain_stderr"].values()), 4))
                 row.update(squares_within_10pct=sum(abs(e) <= 0.10 for e in sq_err), squares_n=len(sq_err),
                            squares_err_median_abs=round(float(np.median(np.abs(sq_err))), 4))
                 row.update(print_gain=pc["gain"], print_unit=pc["unit"], ref_gain=round(ref["expected"]["gain"], 4),

@@ -185,3 +185,10 @@ def test_sheet_calibration_options(tmp_path):
     r = run_cli("sheet", str(tmp_path / "x.png"), "--calibration", "-o", str(tmp_path / "s.pdf"))
     assert_one_line_error(r, "--calibration writes the calibration chart")
     assert_one_line_error(run_cli("calibrate", "nothing.jpg", "-o", str(tmp_path / "p.txt")), ".json")
+
+
+def test_bench_refuses_counts_below_one():
+    """`bench calibrate` with no photos or no draws of the reference's planes says so in one line."""
+    for opt in ("--seeds", "--draws"):
+        assert_one_line_error(run_cli("bench", "calibrate", "--pilots", opt, "0", "--out", "/nonexistent/x"),
+                              f"{opt} must be at least 1")

@@ -364,8 +364,11 @@ def add_commands(sub) -> None:
              _run("snapshot3d.bench.calibrate", "bench_calibrate_command"))
     _out(bc)
     bc.add_argument("--seeds", type=int, default=6, help="photos per physical preset")
-    bc.add_argument("--pilots", action="store_true", help="also compare the gain with the print codec's pilots "
-                                                          "on a print snapshot photographed with the same seed")
+    bc.add_argument("--pilots", action="store_true", help="also compare the band gains and noise with what the print "
+                                                          "codec's carriers (and pilots) read on flat grey "
+                                                          "photographed with the same seed")
+    bc.add_argument("--draws", type=int, default=8, help="with --pilots: draws of the codec's planes averaged in the "
+                                                        "reference (its standard error goes in the CSV)")
     bc.add_argument("--reference", action="store_true", help="print the presets' reference table "
                                                              "(scanner.calibrate.PRESET_REFERENCE) from seeds 100-111")
     _quick(bc, seeds=1)
