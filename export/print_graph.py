@@ -15,7 +15,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from snapshot3d import formats
-from snapshot3d.codecs import print_carriers, print_fold
+from snapshot3d.codecs import print_carriers, print_fold, print_read
 
 __all__ = ["PrintRestoreGraph"]
 
@@ -121,8 +121,9 @@ class PrintRestoreGraph(nn.Module):
         beta = _solve(cov, gain * shape.abs().mean(0))
         share = torch.einsum("nk,nkb->nb", q * w, onehot)
         resp = share @ (beta * gain)
-        keep = (share @ gain) / torch.where(resp > 1e-30, resp, torch.full_like(resp, 1e-30))
-        combined = q * beta[band] * keep[:, None]
+        ok = resp > 1e-3 * resp.abs().mean()
+        keep = (share @ gain) / torch.where(ok, resp, torch.ones_like(resp))
+        combined = torch.where(ok[:, None], q * beta[band] * keep[:, None], q)
         positive = 2 * (resp > 0).to(torch.int64).sum() > resp.shape[0]
         better = _pilot_snr(vals[:p], combined[:p], signs) > _pilot_snr(vals[:p], q[:p], signs)
         return torch.where(positive & better, combined, q)
@@ -141,8 +142,9 @@ class PrintRestoreGraph(nn.Module):
         unit = torch.clamp(((pil - gain * amp) ** 2 / factor[:p]).mean(), min=1e-14)
         nse = unit * factor[p:]
         a, y, n = scale * gain, read[p:], nse[:m]
-        est = a * prior / (a * a * prior + n) * y[:m]
-        err = prior * n / (a * a * prior + n)
+        w = print_read.linear_weight(a * a, prior, n)
+        est = w / a * y[:m]
+        err = print_read.linear_error(w, prior)
         sd = torch.sqrt(prior[folded])
         args = (y[folded], a[folded] * sd, n[folded], y[m:m + nf], y[m + nf:], gain * fold_amp,
                 nse[m:m + nf], nse[m + nf:])

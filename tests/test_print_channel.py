@@ -76,3 +76,24 @@ def test_writing_a_payload_curve_keeps_the_channel_model(tmp_path, monkeypatch):
     update_budget_curve("print", [(3072, 25.0)], "moderate", "a test")
     got = json.loads(path.read_text())["print"]
     assert got["points"] == [[3072, 25.0]] and got["channel"] == {"gain": 0.5, "unit": 12.0}
+
+
+def test_a_photo_whose_band_combination_misreads_carriers_restores_finite_planes(tmp_path):
+    """A `severe` photo (spot-print in rocket, seed 1002) whose pilots' band combination reads a few carriers with
+    the wrong sign: those keep their designed filters, so no carrier's noise overflows float32. Before, the
+    graph's planes held 256 NaN and its expected rmse was NaN (numpy's noise factor reached 4e54)."""
+    from snapshot3d.bench.decode import _photo, _snapshot
+    from snapshot3d.scanner.sheet import render_sheet
+    from snapshot3d.viewer.decode import read_input
+    from snapshot3d.viewer.media import restore_print
+
+    scene = load_scene_file(asset("spot-print.s3d"))
+    sheet = render_sheet(_snapshot(scene, formats.PRINT_CODEC, load_host("builtin:rocket")),
+                         scene_meta(scene, formats.PRINT_CODEC), 2)
+    _, capture, meta, _ = read_input(_photo(sheet, "severe", 1002, tmp_path))
+    read, factor = print_read.despread(capture, *meta.planes, codec=meta.codec)
+    assert np.all(np.isfinite(factor)) and factor.max() < 1.0
+    mine, reading = print_read.restore(read, factor, *meta.planes, codec=meta.codec)
+    graph, greading = restore_print(capture, *meta.planes, None, meta.codec)
+    assert np.all(np.isfinite(mine)) and np.all(np.isfinite(graph)) and np.isfinite(greading.plane_rmse)
+    assert np.abs(graph - mine).max() < 1e-3 and abs(greading.plane_rmse - reading.plane_rmse) < 1e-4

@@ -10,6 +10,7 @@ import pytest
 from snapshot3d import formats
 from snapshot3d.cameras import orbit_cameras
 from snapshot3d.codecs.print_carriers import print_layout
+from snapshot3d.codecs.print_read import VIEW_PRIOR
 from snapshot3d.codecs.print_source import plane_dct, plane_idct, prior_spectrum
 from snapshot3d.metrics import psnr
 from snapshot3d.paths import asset
@@ -32,7 +33,7 @@ from snapshot3d.viewer.runtime import field_models
 SPOT = asset("spot-print.s3d")
 
 
-def test_error_spectrum_has_the_readings_rmse_and_the_mmse_shape():
+def test_error_spectrum_has_the_readings_rmse_and_the_restores_shape():
     spec = error_spectrum(formats.PRINT_CODEC, 16, 4, gain=0.5, noise=1e-4, rmse=0.12)
     err = spec.total()
     assert err.shape == (3 * 4 * 16 * 16,) and np.all(err > 0)
@@ -41,14 +42,20 @@ def test_error_spectrum_has_the_readings_rmse_and_the_mmse_shape():
     # a quieter channel leaves the carried (low) frequencies a smaller share of the error than the dropped ones
     lows = err.reshape(3, 4, 16, 16)[..., :2, :2].sum() / err.sum()
     assert quiet.reshape(3, 4, 16, 16)[..., :2, :2].sum() / quiet.sum() < lows
-    # where a linear carrier alone holds a coefficient, noise let through plus signal shrunk away is the MMSE
-    # posterior variance p n / (a^2 p + n); the folded ones' is their unfold's, a fixed share of it below
+    # where a linear carrier alone holds a coefficient, noise let through plus signal shrunk away is the restore's
+    # (weight w = a^2 k p / (a^2 k p + n), k = VIEW_PRIOR): (1 - w)^2 p + w^2 n / a^2, above the MMSE posterior
+    # variance p n / (a^2 p + n) (the least a linear estimate leaves); the folded ones' is their unfold's, a fixed
+    # share of the MMSE's below
     lay = print_layout(16, 4, formats.PRINT_CODEC)
     a2 = (lay.scale * 0.5) ** 2
     post = lay.prior * 1e-4 / (a2 * lay.prior + 1e-4)
+    w = a2 * VIEW_PRIOR * lay.prior / (a2 * VIEW_PRIOR * lay.prior + 1e-4)
     lin = np.ones(len(lay.coef), bool)
     lin[lay.folded] = False
-    np.testing.assert_allclose((err[lay.coef] / spec.scale)[lin], post[lin], rtol=1e-9)
+    mine = (err[lay.coef] / spec.scale)[lin]
+    np.testing.assert_allclose(mine, ((1 - w) ** 2 * lay.prior + w * w * 1e-4 / a2)[lin], rtol=1e-9)
+    assert VIEW_PRIOR > 1 and np.all(mine > post[lin] * (1 + 1e-9))
+    np.testing.assert_allclose(spec.weight[lay.coef][lin], w[lin], rtol=1e-12)
     share = fold_error(lay, 0.5, 1e-4)
     assert 0 < share < 1
     np.testing.assert_allclose((err[lay.coef] / spec.scale)[lay.folded], share * post[lay.folded], rtol=1e-9)
@@ -68,11 +75,12 @@ def test_fold_error_falls_as_the_helix_reads_cleaner():
 
 
 def _restored_coefficients(spec: ErrorSpectrum, res: int, channels: int, rho: float, seed: int = 0) -> np.ndarray:
-    """planes (3, C, R, R) whose carried DCT coefficients are what an MMSE restore of a scene with `rho` times the
-    prior's power gives (E[r^2] = w^2 rho p + w (1 - w) p), and 0 where not carried."""
+    """planes (3, C, R, R) whose carried DCT coefficients are what the restore of a scene with `rho` times the
+    prior's power gives (E[r^2] = w^2 rho p + h w (1 - w) p, h the noise heard: `ErrorSpectrum.heard`), and 0
+    where not carried."""
     p = np.tile(prior_spectrum(res).ravel(), 3 * channels)
     w = spec.weight
-    r = np.sqrt(w * w * rho * p + w * (1 - w) * p) * np.random.default_rng(seed).standard_normal(p.size)
+    r = np.sqrt(w * w * rho * p + spec.heard * w * (1 - w) * p) * np.random.default_rng(seed).standard_normal(p.size)
     return plane_idct(np.where(w > 0, r, 0.0), (3, channels, res, res)).astype(np.float32)
 
 
@@ -128,7 +136,8 @@ def test_lost_signal_is_the_scenes_own_shrunk_and_its_edges_harmonics():
     r = plane_dct(planes)
     carried, w = spec.weight > 0, spec.weight
     assert np.all(got[carried] * r[carried] <= 0)          # shrinks: against the restored coefficient's sign
-    x2 = np.maximum(r * r - w * (1 - w) * np.tile(prior_spectrum(res).ravel(), 3 * ch), 0) / np.maximum(w, 1e-3) ** 2
+    heard = spec.heard * w * (1 - w) * np.tile(prior_spectrum(res).ravel(), 3 * ch)
+    x2 = np.maximum(r * r - heard, 0) / np.maximum(w, 1e-3) ** 2
     np.testing.assert_allclose(got[carried] ** 2, ((1 - w) ** 2 * x2 * spec.scale)[carried], rtol=1e-9, atol=1e-15)
     assert np.sum(got[~carried] ** 2) == pytest.approx(np.sum(spec.lost[~carried]), rel=1e-9)
     dropped = plane_idct(np.where(carried, 0.0, got), planes.shape)

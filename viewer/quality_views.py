@@ -1,16 +1,16 @@
 """The print decode's scene-aware quality estimate (issue 38 item 4): what the planes' expected error does to
 *this* scene's views, found by trying it.
 
-The print codec's pilots give the channel's gain and noise; the MMSE restore then has an expected error per
-DCT coefficient, scaled so that its mean is the reading's `plane_rmse` squared (the folded coefficients' share
+The print codec's pilots give the channel's gain and noise; the restore (`print_read.linear_weight`) then has an
+expected error per DCT coefficient, scaled so that its mean is the reading's `plane_rmse` squared (the folded coefficients' share
 from their unfold, `fold_error`). It has parts that act differently on a view (measured on the bench's decodes,
 docs/decoder.md "The quality estimate's error model" and its third pass):
-- the channel noise the MMSE lets through, and the carriers' gain spread (an error in proportion to each
+- the channel noise the restore lets through, and the carriers' gain spread (an error in proportion to each
   coefficient, `GAIN_SPREAD`): random, spread evenly over the planes;
 - the signal the restore loses: drawn from the scene's own restored planes (`lost_signal`), since that error is
   the scene's own contrast and edges, which add up along a view's rays where a random error of the same
   spectrum averages out (2 to 5 dB less harm). Where a coefficient is carried, the restored coefficient shrunk
-  once more by the share the MMSE took ((1 - w) |x|); where none is, the dropped band of a steepened copy of the
+  once more by the share the restore took ((1 - w) |x|); where none is, the dropped band of a steepened copy of the
   planes, at the scene's own power there (read from the restored carried coefficients and extrapolated,
   `scene_power`, rather than the codec's prior, which ran 2.1 dB high on a smooth scene's missing frequencies
   and 1.4 dB low on a detailed one's).
@@ -31,6 +31,7 @@ import numpy as np
 from snapshot3d.cameras import orbit_cameras
 from snapshot3d.codecs import print_fold
 from snapshot3d.codecs.print_carriers import print_layout
+from snapshot3d.codecs.print_read import VIEW_PRIOR, linear_weight
 from snapshot3d.codecs.print_source import plane_dct, plane_idct, prior_spectrum
 from snapshot3d.metrics import psnr
 from snapshot3d.scene import dequantize_planes, quantize_planes
@@ -75,16 +76,21 @@ class ErrorSpectrum:
     """The planes' expected squared error per DCT coefficient, in parts (each (3 * C * R * R,) float64)."""
 
     noise: np.ndarray
-    """the channel noise left after the MMSE (0 where a coefficient is not carried)"""
+    """the channel noise left after the restore (0 where a coefficient is not carried)"""
     lost: np.ndarray
     """the signal the restore loses: the shrunk share where carried, the prior's power where not"""
     weight: np.ndarray
-    """the MMSE weight w of each coefficient (0 where not carried)"""
+    """the restore's weight w of each coefficient (`print_read.linear_weight`; the MMSE's on folded ones; 0 where
+    not carried)"""
     scale: float
     """what `noise` and `lost` were multiplied by so that their mean is the reading's rmse squared"""
     spread: np.ndarray | None = None
     """the error the carriers' gain spread lets through per unit of the scene's squared coefficient,
     w^2 GAIN_SPREAD / gain^2 where a linear carrier holds the coefficient (0 on folded and dropped ones; None: none)"""
+    heard: np.ndarray | None = None
+    """the noise in a restored coefficient (before the scale) in units of w (1 - w) p: `VIEW_PRIOR` where a
+    linear carrier holds it (w^2 n / a^2 = VIEW_PRIOR w (1 - w) p), 1 on folded ones (None: 1 everywhere, the
+    MMSE's identity)"""
 
     def total(self) -> np.ndarray:
         return self.noise + self.lost
@@ -100,7 +106,8 @@ of large coefficients, which `lost_signal` draws), and 0.001 and 0.002 scored al
 
 def error_spectrum(codec: str, res: int, channels: int, gain: float, noise: float, rmse: float,
                    gain_spread: float = GAIN_SPREAD) -> ErrorSpectrum:
-    """The expected error of each plane DCT coefficient after the MMSE restore at the pilots' `gain` and mean
+    """The expected error of each plane DCT coefficient after the restore (`print_read.linear_weight`; the
+    folded coefficients' unfold) at the pilots' `gain` and mean
     `noise` per carrier, scaled so that its mean is `rmse` squared (the reading's own figure, which weighs each
     carrier's noise); the folded coefficients' share from their unfold (`fold_error`), not from their linear
     carrier alone; and the gain spread's error per unit of squared coefficient (`ErrorSpectrum.spread`)."""
@@ -108,18 +115,24 @@ def error_spectrum(codec: str, res: int, channels: int, gain: float, noise: floa
     a2 = (lay.scale * gain) ** 2
     lost = np.tile(prior_spectrum(res).ravel(), 3 * channels)
     left, weight = np.zeros_like(lost), np.zeros_like(lost)
-    w = a2 * lay.prior / (a2 * lay.prior + noise)
+    w = linear_weight(a2, lay.prior, noise)
+    heard_c = np.full_like(w, VIEW_PRIOR)   # the noise in a linear reading, w^2 n / a2, in units of w (1 - w) p
+    left_c, lost_c = heard_c * w * (1 - w) * lay.prior, (1 - w) ** 2 * lay.prior
+    if len(lay.folded):   # the folded coefficients: the MMSE weight, and their unfold's posterior variance
+        k = lay.folded
+        w[k] = a2[k] * lay.prior[k] / (a2[k] * lay.prior[k] + noise)
+        v = (1.0 - w[k]) * fold_error(lay, gain, noise)
+        left_c[k], lost_c[k], heard_c[k] = (1 - v) * v * lay.prior[k], v * v * lay.prior[k], 1.0
     weight[lay.coef] = w
-    v = 1.0 - w   # posterior variance in prior variances; of the folded coefficients, their unfold's (`fold_error`)
-    if len(lay.folded):
-        v[lay.folded] *= fold_error(lay, gain, noise)
-    left[lay.coef] = (1 - v) * v * lay.prior
-    lost[lay.coef] = v * v * lay.prior
+    left[lay.coef] = left_c
+    lost[lay.coef] = lost_c
+    heard_all = np.zeros_like(lost)
+    heard_all[lay.coef] = heard_c
     scale = rmse * rmse / max(float((left + lost).mean()), 1e-30)
     spread = np.zeros_like(lost)
     spread[lay.coef] = w * w * gain_spread / max(gain, 1e-3) ** 2
     spread[lay.coef[lay.folded]] = 0.0   # the helix reads a phase, which a gain does not move
-    return ErrorSpectrum(left * scale, lost * scale, weight, scale, spread)
+    return ErrorSpectrum(left * scale, lost * scale, weight, scale, spread, heard_all)
 
 
 def fold_error(lay, gain: float, noise: float, sample: int = 64, seed: int = 0) -> float:
@@ -163,6 +176,7 @@ def scene_power(planes: np.ndarray, err: ErrorSpectrum) -> np.ndarray:
     res, channels = planes.shape[2], planes.shape[1]
     r2 = plane_dct(planes) ** 2
     w = err.weight
+    h = np.ones_like(w) if err.heard is None else err.heard
     p = np.tile(prior_spectrum(res).ravel(), 3 * channels)
     f = _frequency(res, channels)
     rows, ys = [[1.0 / _PRIOR_SD[0], 0.0], [0.0, 1.0 / _PRIOR_SD[1]]], [0.0, 0.0]
@@ -171,8 +185,9 @@ def scene_power(planes: np.ndarray, err: ErrorSpectrum) -> np.ndarray:
         den = float(np.sum(w[m] ** 2 * p[m]))
         if den <= 0:
             continue
-        rho = min(max(1.0 + float(np.sum(r2[m] - w[m] * p[m])) / den, 0.1), 10.0)
-        var = 2.0 * float(np.sum((w[m] ** 2 * rho * p[m] + w[m] * (1 - w[m]) * p[m]) ** 2)) / den ** 2 / rho ** 2
+        heard = w[m] * (1 - w[m]) * p[m] * h[m]   # the noise's power in r
+        rho = min(max(float(np.sum(r2[m] - heard)) / den, 0.1), 10.0)
+        var = 2.0 * float(np.sum((w[m] ** 2 * rho * p[m] + heard) ** 2)) / den ** 2 / rho ** 2
         sw = 1.0 / np.sqrt(var)
         rows.append([sw, sw * (np.log2(np.sqrt(lo * hi)) - 3.0)])
         ys.append(sw * np.log(rho))
@@ -195,16 +210,17 @@ def _scene_squares(planes: np.ndarray, err: ErrorSpectrum) -> tuple[np.ndarray, 
     carrier of weight w), 0 where the noise explains r and where nothing is carried."""
     r = plane_dct(planes.astype(np.float64))
     w = err.weight
+    h = np.ones_like(w) if err.heard is None else err.heard
     res, channels = planes.shape[2], planes.shape[1]
     prior = np.tile(prior_spectrum(res).ravel(), 3 * channels)
     wk = np.where(w > 0, np.maximum(w, 1e-3), 1.0)
-    return r, np.where(w > 0, np.maximum(r * r - w * (1 - w) * prior, 0.0) / (wk * wk), 0.0)
+    return r, np.where(w > 0, np.maximum(r * r - h * w * (1 - w) * prior, 0.0) / (wk * wk), 0.0)
 
 
 def lost_signal(planes: np.ndarray, err: ErrorSpectrum, rho: np.ndarray, steepness: float) -> np.ndarray:
     """(3 * C * R * R,) float64 DCT coefficients of the signal the restore lost, drawn from the scene's own
     restored planes (3, C, R, R) rather than at random. Where a coefficient is carried: the scene's coefficient
-    x shrunk by the linear carrier's MMSE weight w, (1 - w) x, with |x| read back from the restored r
+    x shrunk by the linear carrier's weight w, (1 - w) x, with |x| read back from the restored r
     (`_scene_squares`), signed to shrink the planes further (the restore shrank the scene: the estimate shrinks
     the restored planes by as much again). Where none is: the dropped band of a steepened copy of the planes
     (tanh(s p) / tanh(s): the harmonics of their own edges), scaled to the lost power `err.lost * rho` of the
