@@ -203,7 +203,7 @@ def codec_reference(preset, seed: int, rng, draws: int = 3) -> dict:
         square.append(_carrier_response(cap, snap, lay, np.ones(lay.chips.shape, bool)))
         ch = measure(snap, cap, 16, 4)
         pilots.append({"gain": ch.gain, "unit": ch.unit})
-        per_sq.append([[_carrier_response(cap, snap, lay, k)["band_gain"][b] for b in lay.bands] for k in keeps])
+        per_sq.append([list(_carrier_response(cap, snap, lay, k)["band_gain"].values()) for k in keeps])
         weights.append(_square_weights(cap, list(lay.bands)))
     g, w = np.mean(per_sq, 0), np.mean(weights, 0)   # (squares, bands)
     ew = w * np.array([PRINT_BANDS[b] for b in lay.bands])   # over all bands as carriers: each band by its energy

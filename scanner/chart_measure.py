@@ -186,11 +186,13 @@ def measure_bands(img: np.ndarray) -> dict:
             f = 2 ** int(b[-3])   # the square's place in the band's whole-square map (to a cell: the model is smooth)
             h, w = c[b].shape
             parts[b].append((c[b], r[b], model[b][y0 // f:y0 // f + h, x0 // f:x0 // f + w]))
-    num, den, gain, out = {}, {}, {}, {}
+    num, den, gain, sq, out = {}, {}, {}, {}, {}
     for b, ps in parts.items():
-        num[b] = sum(float(np.sum(c * r / n ** 2)) for c, r, n in ps)
-        den[b] = sum(float(np.sum(r * r / n ** 2)) for c, r, n in ps)
+        nums = [float(np.sum(c * r / n ** 2)) for c, r, n in ps]   # per carrier square
+        dens = [float(np.sum(r * r / n ** 2)) for _, r, n in ps]
+        num[b], den[b] = sum(nums), sum(dens)
         gain[b] = num[b] / max(den[b], 1e-30)
+        sq[b] = [x / max(y, 1e-30) for x, y in zip(nums, dens)]
     total_g = sum(num.values()) / max(sum(den.values()), 1e-30)
     plain_g = sum(float(np.sum(c * r)) for ps in parts.values() for c, r, _ in ps) / max(
         sum(float(np.sum(r * r)) for ps in parts.values() for _, r, _ in ps), 1e-30)
@@ -203,9 +205,8 @@ def measure_bands(img: np.ndarray) -> dict:
         nb = sum(x.size for x in r2)
         pg = sum(float(np.sum(c * r)) for c, r, _ in ps) / max(sum(float(np.sum(r * r)) for _, r, _ in ps), 1e-30)
         raw = sum(float(np.sum((c - pg * r) ** 2)) for c, r, _ in ps)   # unweighted, as `noise` always was
-        sq = [float(np.sum(c * r / n ** 2)) / max(float(np.sum(r * r / n ** 2)), 1e-30) for c, r, n in ps]
         out[b] = {"gain": round(gain[b], 4), "noise": float(f"{raw / nb:.4g}"), "unit": float(f"{rb / vb:.4g}"),
-                  "squares": [round(x, 4) for x in sq]}
+                  "squares": [round(x, 4) for x in sq[b]]}
         rel += e * sum(float(np.sum((c - total_g * r) ** 2 / n ** 3)) for c, r, n in ps)
         var += e * vb
         res2 += raw

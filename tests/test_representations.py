@@ -46,8 +46,9 @@ def test_refused_in_one_line():
         size_for_budget("grid", 500)
     r = run_cli("bench", "fit", "--representations", "--kinds", "triplane,octree", "--out", "/nonexistent/x")
     assert_one_line_error(r, "unknown representation 'octree'")
-    for args, cause in ((["--budgets-kb", "abc"], "--budgets-kb must be numbers"), (["--scenes", "nope"], "unknown bench "
-                        "scene 'nope'"), (["--rep-steps", "0"], "--rep-steps must be >= 1, not 0"),
+    for args, cause in ((["--budgets-kb", "abc"], "--budgets-kb must be numbers"),
+                        (["--scenes", "nope"], "unknown bench scene 'nope'"),
+                        (["--rep-steps", "0"], "--rep-steps must be >= 1, not 0"),
                         (["--budgets-kb", "-4"], "budgets above 0")):
         assert_one_line_error(run_cli("bench", "fit", "--representations", *args, "--out", "/nonexistent/x"), cause)
 

@@ -3,8 +3,8 @@
 
 The print codec's pilots give the channel's gain and noise; the restore (`print_read.linear_weight`) then has an
 expected error per DCT coefficient, scaled so that its mean is the reading's `plane_rmse` squared (the folded
-coefficients' share from their unfold, `fold_error`). It has parts that act differently on a view (measured on the bench's decodes,
-docs/decoder.md "The quality estimate's error model" and its third pass):
+coefficients' share from their unfold, `fold_error`). It has parts that act differently on a view (measured on
+the bench's decodes, docs/decoder.md "The quality estimate's error model" and its third pass):
 - the channel noise the restore lets through, and the carriers' gain spread (an error in proportion to each
   coefficient, `GAIN_SPREAD`): random, spread evenly over the planes;
 - the signal the restore loses: drawn from the scene's own restored planes (`lost_signal`), since that error is

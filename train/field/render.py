@@ -13,7 +13,8 @@ from .field import composite, decode, sample_planes
 from .rays import view_rays
 from .sampler import BoxFrame, march
 
-__all__ = ["render_rays", "composite_samples", "render_views", "occupancy_from_planes", "density_fn", "cell_alpha", "render_pixels"]
+__all__ = ["render_rays", "composite_samples", "render_views", "occupancy_from_planes", "density_fn", "cell_alpha",
+           "render_pixels"]
 
 
 def density_fn(planes: Tensor, decoder):
