@@ -39,9 +39,10 @@ PRESET_REFERENCE = {
 }
 E2E_REFERENCE = {
     # median e2e_psnr (dB) through each preset of the print codec's scenes at planes 16x4 (3072 values):
-    # spot-print, lego-print-auto; 24 photos each (`snapshot3d bench codec-print`, bench/results/codec_print.csv
-    # at commit 9d6891e)
-    "mild": (25.85, 20.06), "moderate": (24.14, 17.94), "severe": (18.51, 13.46),
+    # spot-print, lego-print-auto; 24 photos each, read as the reader does since print_read.VIEW_PRIOR
+    # (`snapshot3d bench e2e --medium print ... --seeds 6 --out bench/results/e2e_chosen`, commit 9180021;
+    # with the MMSE reader, bench/results/codec_print.csv at 9d6891e: 25.85 / 24.14 / 18.51, 20.06 / 17.94 / 13.46)
+    "mild": (25.87, 20.06), "moderate": (24.26, 18.31), "severe": (18.52, 13.66),
 }
 _PLANES = (16, 4)
 _MATCH_MIN = 0.04   # carrier correlation that tells a chart whose QR code could not be read

@@ -84,7 +84,7 @@ def test_moderate_profile_gives_the_moderate_channel(moderate):
 def test_budget_choice_on_a_moderate_profile(moderate):
     """The print ladder (spot's committed rungs, 5 held-out views) chooses the same rung through the profile's
     channel as through the `moderate` curve's, and spot 16x4's predicted e2e_psnr lies within 1.5 dB of the
-    codec bench's measured median at moderate (E2E_REFERENCE)."""
+    print benchmark's measured median at moderate (E2E_REFERENCE)."""
     from snapshot3d.loaders import load_scene
     from snapshot3d.paths import asset
     from snapshot3d.scene import dequantize_planes, load_scene_file
