@@ -139,3 +139,40 @@ def test_a_random_background_acts_where_the_images_carry_coverage_and_nowhere_el
              for name, p in (("cover", posed), ("none", replace(posed, alpha=None))) for rb in (False, True)}
     assert not np.array_equal(codes["cover", True], codes["cover", False])
     assert np.array_equal(codes["none", True], codes["none", False])
+
+
+def test_the_object_takes_the_photos_colour_where_it_is_opaque_and_its_own_at_its_edge():
+    from snapshot3d.train.field.object_carve import PHOTO_RAMP, photo_colours
+
+    own, photo = np.array([0.2, 0.4, 0.6], np.float32), np.array([0.7, 0.1, 0.3], np.float32)
+    cover = np.array([[[1.0, 0.3, 0.0, PHOTO_RAMP[0] / 2 + PHOTO_RAMP[1] / 2]]], np.float32)   # (1, 1, 4)
+    views = (cover[..., None] * own + (1 - cover[..., None])).astype(np.float32)   # the render over white
+    out = photo_colours(views, cover, np.broadcast_to(photo, views.shape))
+    assert out.shape == views.shape and out.dtype == np.float32
+    np.testing.assert_allclose(out[0, 0, 0], photo, atol=1e-6)                        # opaque: the photo's colour
+    np.testing.assert_allclose(out[0, 0, 1], views[0, 0, 1], atol=1e-6)               # a soft edge: its own
+    np.testing.assert_allclose(out[0, 0, 2], 1.0, atol=1e-6)                          # nothing: white
+    a = cover[0, 0, 3]
+    np.testing.assert_allclose(out[0, 0, 3], a * (own + photo) / 2 + 1 - a, atol=1e-5)   # half way up the ramp
+
+
+def test_the_refined_cameras_give_the_corrected_rays():
+    from snapshot3d.cameras import orbit_poses
+    from snapshot3d.train.field.object_carve import refined_c2w
+    from snapshot3d.train.field.pose_refine import correct_rays
+    from snapshot3d.train.field.rays import view_rays
+    from snapshot3d.train.field.sampler import BoxFrame
+
+    frame = BoxFrame.from_box(np.array([[-1, -2, -1], [3, 2, 1]], np.float32))   # scale 2: shifts are in q units
+    c2w = np.asarray(orbit_poses(3, 6.0, 20.0), np.float32)
+    params = np.array([[0.02, -0.01, 0.03, 0.05, 0.0, -0.02], [0, 0, 0, 0, 0, 0], [-0.04, 0.02, 0.0, 0.0, 0.1, 0.0]],
+                      np.float32)
+    intr = np.array([30.0, 30.0, 16.0, 12.0], np.float32)
+    moved = refined_c2w(c2w, params, frame.scale)
+    for v in range(3):
+        o, d = view_rays(c2w[v], intr, 32, 24, frame)
+        view = torch.full((o.shape[0],), v, dtype=torch.long)
+        want_o, want_d = correct_rays(torch.from_numpy(params), view, o.float(), d.float())
+        got_o, got_d = view_rays(moved[v], intr, 32, 24, frame)
+        torch.testing.assert_close(got_o.float(), want_o, rtol=1e-4, atol=1e-4)
+        torch.testing.assert_close(got_d.float(), want_d, rtol=1e-4, atol=1e-4)

@@ -265,7 +265,8 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
     lost_ground = "ground_z" in posed.info and posed.info["ground_z"] is None
     if st.background is not None and cfg.object_steps > 0 and not lost_ground:
         from .object_carve import object_config, object_views
-        target = object_views(st.planes.planes.detach(), decoder, posed)
+        poses = None if st.poses is None else st.poses.params.detach().cpu().numpy()
+        target = object_views(st.planes.planes.detach(), decoder, posed, poses)
         if target is not None:
             sub = object_config(cfg)
             alone = fit(target[0], decoder, sub, init_planes=st.planes.planes.detach(), hull=target[1],

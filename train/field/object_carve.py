@@ -10,7 +10,10 @@ sideways in the ABOVE layers just over the band: a leg or a body resting on the 
 texture and the object's shadow round it do not); of those, the connected pieces at least KEEP_SHARE of the
 largest's size; then grown by NEAR cells, so that the object's soft edge stays, but not into the floor band
 beyond what stands there. `object_views` renders the training
-views of the fitted planes with every other cell skipped, over white, and fits the planes to those views (from where
+views of the fitted planes with every other cell skipped, over white, at the poses the fit refined; where a view is
+opaque its colour is the photo's (`photo_colours`): the planes of a fit with the ground in the box paint the ground's
+texture into the object's colour too (the plane over the floor is shared by every height), which the photo does not
+have. The planes are then fitted to those views (from where
 they are, DISTIL_LR) with the object's cells as their hull: the rays skip the other cells and the empty-space
 penalty (`fit.empty_alpha`) drives their density to zero, so that the decode side, which finds its occupancy from
 the planes alone, sees them empty too (`fit.fit` runs that fit). Fitting them with the cells cut while still
@@ -26,7 +29,8 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.posed import PosedImages
 
-__all__ = ["object_cells", "object_views", "object_config", "SOLID", "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
+__all__ = ["object_cells", "object_views", "object_config", "photo_colours", "refined_c2w", "PHOTO_RAMP", "SOLID",
+           "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
            "TEACHER_SIZE", "DISTIL_LR"]
 
 SOLID = 0.2         # one-cell opacity of an object's cell (0.5 cut half of a short fit's cloudy teapot)
@@ -37,6 +41,7 @@ KEEP_SHARE = 0.05   # connected pieces smaller than this share of the largest ar
 NEAR = 2            # cells the object's cells are grown by
 TEACHER_SIZE = 400  # longer side, pixels, of the views the planes are fitted to (the capture's when smaller)
 DISTIL_LR = 0.03    # the planes' learning rate then, at the first step
+PHOTO_RAMP = (0.5, 0.9)   # the view's opacity over which its colour gives way to the photo's
 
 
 def object_cells(alpha: np.ndarray, solid: float = SOLID, floor_band: float = FLOOR_BAND, above: float = ABOVE,
@@ -64,11 +69,40 @@ def object_cells(alpha: np.ndarray, solid: float = SOLID, floor_band: float = FL
     return cells
 
 
-def object_views(planes, decoder, posed: PosedImages):
-    """planes (3, C, R, R) torch, fitted with the background model over posed.box -> (the views to fit the object
-    alone to: posed's training views rendered over white with the object's cells only, at most TEACHER_SIZE pixels
-    on the longer side, as a PosedImages; the object's cells (G, G, G) bool torch, their hull), or None when no cell
-    is solid."""
+def photo_colours(views: np.ndarray, cover: np.ndarray, photos: np.ndarray,
+                  ramp: tuple[float, float] = PHOTO_RAMP) -> np.ndarray:
+    """views (N, H, W, 3) RGB in [0, 1] rendered over white with opacity cover (N, H, W) in [0, 1], photos
+    (N, H, W, 3) RGB of the same cameras -> (N, H, W, 3) float32 over white with the same opacity: the colour is the
+    photo's where the view is opaque (weight rising from 0 at opacity ramp[0] to 1 at ramp[1]) and the view's own
+    (un-premultiplied) colour at its soft edge, where the photo shows the room through the object's outline."""
+    a = cover[..., None].astype(np.float32)
+    own = np.where(a > 1e-3, (views - (1 - a)) / np.maximum(a, 1e-3), 1.0).clip(0.0, 1.0)
+    w = np.clip((a - ramp[0]) / (ramp[1] - ramp[0]), 0.0, 1.0)
+    return (a * (w * photos + (1 - w) * own) + (1 - a)).astype(np.float32)
+
+
+def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray:
+    """c2w (V, 4, 4) OpenGL of the training views and their `pose_refine` corrections params (V, 6) [axis-angle r |
+    shift t in q units] in a box frame of `scale` world units per q unit -> (V, 4, 4) float32, the cameras whose
+    rays are the corrected ones (`pose_refine.correct_rays`: origin + t, directions turned by R(r))."""
+    import torch
+
+    from .pose_refine import axis_angle_matrix
+
+    rot = axis_angle_matrix(torch.from_numpy(np.asarray(params[:, :3], np.float32))).numpy()
+    out = np.array(c2w, np.float32, copy=True)
+    out[:, :3, :3] = rot @ out[:, :3, :3]
+    out[:, :3, 3] += np.asarray(params[:, 3:], np.float32) * np.float32(scale)
+    return out
+
+
+def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None):
+    """planes (3, C, R, R) torch, fitted with the background model over posed.box; poses: the fit's pose corrections
+    (V, 6) of posed.train, or None -> (the views to fit the object alone to: posed's training views at those poses,
+    rendered with the object's cells only over white, at most TEACHER_SIZE pixels on the longer side, their colour
+    the photos' where they are opaque (`photo_colours`), as a PosedImages; the object's cells (G, G, G) bool torch,
+    their hull), or None when no cell is solid."""
+    import cv2
     import torch
 
     from .render import cell_alpha, occupancy_from_planes, render_views
@@ -81,11 +115,15 @@ def object_views(planes, decoder, posed: PosedImages):
     frame = BoxFrame.from_box(box, planes.device)
     occ = occupancy_from_planes(planes, decoder, frame) & keep
     tr = posed.train
+    c2w = posed.c2w[tr] if poses is None else refined_c2w(posed.c2w[tr], poses, frame.scale)
     scale = min(1.0, TEACHER_SIZE / max(posed.width, posed.height))
     w, h = max(1, round(posed.width * scale)), max(1, round(posed.height * scale))
     intrinsics = (posed.intrinsics[tr] * np.float32(scale)).astype(np.float32)
-    views, cover = render_views(planes, decoder, box, posed.c2w[tr], intrinsics, w, h, occ=occ, with_opacity=True)
-    return PosedImages(images=views, alpha=np.clip(cover, 0.0, 1.0), c2w=posed.c2w[tr],
+    views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ, with_opacity=True)
+    photos = posed.images[tr] if (w, h) == (posed.width, posed.height) else \
+        np.stack([cv2.resize(p, (w, h), interpolation=cv2.INTER_AREA) for p in posed.images[tr]])
+    cover = np.clip(cover, 0.0, 1.0)
+    return PosedImages(images=photo_colours(views, cover, photos), alpha=cover, c2w=c2w,
                        intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
                        name=posed.name), keep
 
