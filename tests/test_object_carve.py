@@ -7,7 +7,7 @@ import torch
 
 from snapshot3d.errors import UserError
 from snapshot3d.train.field.config import FitConfig, check_fit_config
-from snapshot3d.train.field.object_carve import object_cells
+from snapshot3d.train.field.object_carve import NEAR, object_cells
 
 
 def _scene(g: int = 64) -> np.ndarray:
@@ -26,9 +26,9 @@ def test_the_object_keeps_its_foot_and_loses_the_ground_the_haze_and_a_floater()
     assert not keep[5, 5, 1] and not keep[60, 40, 0]      # the ground away from it
     assert not keep[51, 51, 51]                           # the floater, apart from the object
     assert not keep[5, 60, 30]                            # haze far from the object
-    assert keep[29, 24, 20] and not keep[33, 24, 20]      # grown by NEAR (2) cells, not more ...
+    assert keep[27 + NEAR, 24, 20] and not keep[28 + NEAR, 24, 20]   # grown by NEAR cells, not more ...
     assert keep[28, 24, 1] and not keep[29, 24, 1]        # ... and in the floor band only by REACH (1)
-    assert keep.mean() < 12 * 12 * 42 / 64 ** 3   # the column grown by 2 cells, nothing else
+    assert keep.mean() < (8 + 2 * NEAR) ** 2 * (40 + NEAR) / 64 ** 3   # the column grown by NEAR cells, nothing else
 
 
 def test_nothing_solid_keeps_nothing():
