@@ -296,3 +296,24 @@ def test_each_regulariser_adds_a_finite_term_with_a_gradient_into_the_planes():
         grad, = torch.autograd.grad(term, planes)
         assert float(term.detach()) > 0 and np.isfinite(float(term.detach())), field
         assert float(grad.abs().sum()) > 0, field
+
+
+def test_the_object_box_holds_the_objects_cells_with_a_margin_and_keeps_the_floor():
+    from snapshot3d.train.field.box_tighten import OBJECT_MARGIN, cells_box
+    box = np.array([[-2.0, -2.0, -1.0], [2.0, 2.0, 3.0]])   # 16 cells: 0.25 per cell on every axis
+    cells = np.zeros((16, 16, 16), bool)
+    cells[6:10, 5:12, 0:8] = True
+    m = OBJECT_MARGIN * 0.25
+    out = cells_box(cells, box)
+    assert out.dtype == np.float32 and out.shape == (2, 3)
+    np.testing.assert_allclose(out, [[-0.5 - m, -0.75 - m, -1.0], [0.5 + m, 1.0 + m, 1.0 + m]], atol=1e-6)
+    cells[:, 15, 3] = True   # cells at the box's side: the box is not grown past it
+    assert cells_box(cells, box)[1, 1] == 2.0
+    np.testing.assert_array_equal(cells_box(np.zeros((16, 16, 16), bool), box), box.astype(np.float32))
+
+
+def test_the_object_box_share_is_checked_in_one_line():
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.field.config import FitConfig, check_fit_config
+    with pytest.raises(UserError, match="--object-box"):
+        check_fit_config(FitConfig(background="outer", object_box=1.5))

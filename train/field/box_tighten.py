@@ -17,7 +17,7 @@ from snapshot3d.posed import PosedImages
 from .config import FitConfig
 from .render import cell_alpha
 
-__all__ = ["tighten_box", "box_from_density", "PREFIT_FRACTION"]
+__all__ = ["tighten_box", "box_from_density", "object_box", "cells_box", "PREFIT_FRACTION", "OBJECT_MARGIN"]
 
 PREFIT_FRACTION = 0.3   # of the fit's steps, spent on the short fit in the first box
 GRID = 64
@@ -28,6 +28,7 @@ SOLID = 0.5             # with cfg.tighten_sides: cells above this opacity are t
 SOLID_SHARE = 0.02      # ... the sides and top are cut where this share of them lies beyond, on each side ...
 SIDE_MARGIN = 0.25      # ... and moved out again by this fraction of what is kept, plus SIDE_CELLS cells
 SIDE_CELLS = 2
+OBJECT_MARGIN = 2       # cells of the object-box fit's grid round the object's cells (which are grown already)
 
 
 def box_from_density(alpha: np.ndarray, box: np.ndarray, looks_down: bool,
@@ -102,3 +103,36 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tup
             "prefit_steps": pre.steps, "prefit_seconds": round(time.perf_counter() - t0, 1),
             "sides_cut": bool(cfg.tighten_sides)}
     return box, info
+
+
+def cells_box(cells: np.ndarray, box: np.ndarray, margin: int = OBJECT_MARGIN) -> np.ndarray:
+    """cells (G, G, G) bool [ix, iy, iz] over world `box` (2, 3) -> (2, 3) float32, the box round the set cells
+    widened by `margin` cells, inside `box`, its floor kept (the ground cut); `box` when no cell is set."""
+    box = np.asarray(box, np.float64)
+    if not cells.any():
+        return box.astype(np.float32)
+    g = np.array(cells.shape, np.float64)
+    idx = np.nonzero(cells)
+    lo = np.array([i.min() for i in idx], np.float64) - margin
+    hi = np.array([i.max() for i in idx], np.float64) + 1 + margin
+    cell = (box[1] - box[0]) / g
+    out = np.stack([np.maximum(box[0], box[0] + lo * cell), np.minimum(box[1], box[0] + hi * cell)])
+    out[0, 2] = box[0, 2]
+    return out.astype(np.float32)
+
+
+def object_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tuple[np.ndarray, dict]:
+    """The box of `posed` (already cut at the ground) cut round the object: a fit of cfg.object_box of the steps
+    with the background model, the object's cells of its planes (`object_carve.object_cells`, as the object-alone
+    step finds them), and `cells_box` round them -> (box (2, 3) float32 world, info for the report). After the
+    pre-fit the density is too diffuse for a tight cut (docs/capture.md); after this longer fit the object's cells
+    lie within a few cells of the object, and 16x4 planes spread over a box 1.5 times too wide lose 1-2 dB."""
+    from .fit import fit
+    from .object_carve import object_cells
+    t0 = time.perf_counter()
+    pre = replace(cfg, steps=max(10, round(cfg.steps * cfg.object_box)), background="outer", qat_fraction=0.0,
+                  channel_fraction=0.0, object_steps=0.0)
+    res = fit(posed, decoder, pre, device=device)
+    alpha = cell_alpha(res.state.planes.planes.detach(), decoder, posed.box, GRID)
+    box = cells_box(object_cells(alpha), posed.box)
+    return box, {"object_box_steps": pre.steps, "object_box_seconds": round(time.perf_counter() - t0, 1)}

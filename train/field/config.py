@@ -94,6 +94,10 @@ class FitConfig:
                                        "takes the planes to the object alone, against their own views with the "
                                        "ground, the shadow and the haze cut away (train/field/object_carve.py; "
                                        "skipped when the automatic box found no ground); 0: off")
+    object_box: float = config_field(0.5, "with --background outer, --box auto and the ground found: a fit of this "
+                                     "share of the steps in the tightened box finds the object's cells "
+                                     "(object_carve.object_cells), and the planes are fitted in the box round them "
+                                     "(train/field/box_tighten.py: more texels on the object); 0: off")
 
 
 @dataclass
@@ -135,6 +139,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("background-samples", cfg.background_samples >= 2, ">= 2"),
         ("ground-texture", 0 <= cfg.ground_texture <= 1024, "in 0..1024"),
         ("object-steps", 0 <= cfg.object_steps <= 4, "in [0, 4]"),
+        ("object-box", 0 <= cfg.object_box <= 1, "in [0, 1]"),
         ("wall-margin", 0 < cfg.wall_margin <= 0.25, "in (0, 0.25]"),
     ]
 
