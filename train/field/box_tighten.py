@@ -4,7 +4,9 @@ planes' density on a grid over that box, the ground, when most cameras look down
 is cut at its top, so that the floor is left to the background model and the planes hold what stands on it. The
 fit then starts again in the new box. With cfg.tighten_sides (the default) the sides and the top are cut too,
 round the cells denser than SOLID with a wide margin: after a short fit the density is diffuse, and a tight cut
-would take part of the object (bench capture-background: fewer floaters on spot and duck, docs/capture.md)."""
+would take part of the object (bench capture-background: fewer floaters on spot and duck, docs/capture.md).
+With the ground found, `object_box` then cuts the box round the object's cells of a longer fit in it
+(cfg.object_box of the steps), which are tight enough to cut round: the planes' texels go to the object."""
 from __future__ import annotations
 
 import time
