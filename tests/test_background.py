@@ -306,7 +306,8 @@ def test_the_object_box_holds_the_objects_cells_with_a_margin_and_keeps_the_floo
     m = OBJECT_MARGIN * 0.25
     out = cells_box(cells, box)
     assert out.dtype == np.float32 and out.shape == (2, 3)
-    np.testing.assert_allclose(out, [[-0.5 - m, -0.75 - m, -1.0], [0.5 + m, 1.0 + m, 1.0 + m]], atol=1e-6)
+    np.testing.assert_allclose(out, [[-0.5 - m, -0.75 - m, -1.0], [0.5 + m, 1.0 + m, 1.0 + m]], rtol=1e-6,
+                               atol=1e-6)
     cells[:, 15, 3] = True   # cells at the box's side: the box is not grown past it
     assert cells_box(cells, box)[1, 1] == 2.0
     np.testing.assert_array_equal(cells_box(np.zeros((16, 16, 16), bool), box), box.astype(np.float32))

@@ -149,11 +149,12 @@ def test_the_object_takes_the_photos_colour_where_it_is_opaque_and_its_own_at_it
     views = (cover[..., None] * own + (1 - cover[..., None])).astype(np.float32)   # the render over white
     out = photo_colours(views, cover, np.broadcast_to(photo, views.shape))
     assert out.shape == views.shape and out.dtype == np.float32
-    np.testing.assert_allclose(out[0, 0, 0], photo, atol=1e-6)                        # opaque: the photo's colour
-    np.testing.assert_allclose(out[0, 0, 1], views[0, 0, 1], atol=1e-6)               # a soft edge: its own
-    np.testing.assert_allclose(out[0, 0, 2], 1.0, atol=1e-6)                          # nothing: white
+    np.testing.assert_allclose(out[0, 0, 0], photo, rtol=1e-6, atol=1e-6)            # opaque: the photo's colour
+    np.testing.assert_allclose(out[0, 0, 1], views[0, 0, 1], rtol=1e-6, atol=1e-6)   # a soft edge: its own
+    np.testing.assert_allclose(out[0, 0, 2], 1.0, rtol=1e-6, atol=1e-6)              # nothing: white
     a = cover[0, 0, 3]
-    np.testing.assert_allclose(out[0, 0, 3], a * (own + photo) / 2 + 1 - a, atol=1e-5)   # half way up the ramp
+    half = a * (own + photo) / 2 + 1 - a   # half way up the ramp: half the photo's colour, half its own
+    np.testing.assert_allclose(out[0, 0, 3], half, rtol=1e-5, atol=1e-5)
 
 
 def test_the_refined_cameras_give_the_corrected_rays():

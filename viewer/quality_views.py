@@ -120,7 +120,7 @@ def error_spectrum(codec: str, res: int, channels: int, gain: float, noise: floa
     left_c, lost_c = heard_c * w * (1 - w) * lay.prior, (1 - w) ** 2 * lay.prior
     if len(lay.folded):   # the folded coefficients: the MMSE weight, and their unfold's posterior variance
         k = lay.folded
-        w[k] = a2[k] * lay.prior[k] / (a2[k] * lay.prior[k] + noise)
+        w[k] = linear_weight(a2[k], lay.prior[k], noise, view_prior=1.0)
         v = (1.0 - w[k]) * fold_error(lay, gain, noise)
         left_c[k], lost_c[k], heard_c[k] = (1 - v) * v * lay.prior[k], v * v * lay.prior[k], 1.0
     weight[lay.coef] = w

@@ -152,11 +152,11 @@ checked on others (two held-out hosts too, seeds 2000-2001): e2e_psnr +0.03 to +
 lego at `moderate`, no severity worse (docs/print-codec.md, "Shrinking for the views"). 1 is the plain MMSE."""
 
 
-def linear_weight(a2, prior, noise):
+def linear_weight(a2, prior, noise, view_prior: float = VIEW_PRIOR):
     """The weight w a linear carrier's reading gets (the estimate is w y / a for gain a, a2 = a^2): the MMSE's
-    a2 p / (a2 p + n) with the prior p scaled by `VIEW_PRIOR`. Its error per coefficient is (1 - w)^2 p (the
-    shrink) + w^2 n / a2 (the noise)."""
-    return a2 * VIEW_PRIOR * prior / (a2 * VIEW_PRIOR * prior + noise)
+    a2 p / (a2 p + n) with the prior p scaled by `view_prior` (1: the MMSE itself). Its error per coefficient is
+    (1 - w)^2 p (the shrink) + w^2 n / a2 (the noise)."""
+    return a2 * view_prior * prior / (a2 * view_prior * prior + noise)
 
 
 def linear_error(w, prior):

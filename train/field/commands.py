@@ -143,9 +143,9 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
     read = posed.info["capture"]
     ground = f", the ground at z = {info['ground_z']:.3g}" if info["ground_z"] is not None else ""
     ground += ", sides and top cut" if info.get("sides_cut") else ""
+    info_ground = {**posed.info, "ground_z": info["ground_z"]}
     if info["ground_z"] is not None and cfg.object_box > 0 and cfg.object_steps > 0:   # round the object's cells
-        box, more = object_box(replace(posed, box=box, info={**posed.info, "ground_z": info["ground_z"]}), decoder,
-                               cfg, device)
+        box, more = object_box(replace(posed, box=box, info=info_ground), decoder, cfg, device)
         info.update(more)
         ground += f", then cut round the object's cells of a {more['object_box_steps']}-step fit"
     read.update(box=box.tolist(), box_from=read["box_from"] + f"; tightened from {info['prefit_steps']} steps' "
@@ -154,7 +154,7 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
         lo, hi = (", ".join(f"{float(x):.3g}" for x in corner) for corner in box)
         print(f"box ({lo})..({hi}) (tightened from {info['prefit_steps']} steps' density{ground}, "
               f"{info['prefit_seconds'] + info.get('object_box_seconds', 0):.0f} s)")
-    return replace(posed, box=box, info={**posed.info, "ground_z": info["ground_z"]}), info
+    return replace(posed, box=box, info=info_ground), info
 
 
 def fit_command(args) -> int:
