@@ -7,7 +7,7 @@ import torch
 
 from snapshot3d.errors import UserError
 from snapshot3d.train.field.config import FitConfig, check_fit_config
-from snapshot3d.train.field.object_carve import NEAR, object_cells
+from snapshot3d.train.field.object_carve import FOOTPRINT, NEAR, object_cells
 
 
 def _scene(g: int = 64) -> np.ndarray:
@@ -29,6 +29,53 @@ def test_the_object_keeps_its_foot_and_loses_the_ground_the_haze_and_a_floater()
     assert keep[27 + NEAR, 24, 20] and not keep[28 + NEAR, 24, 20]   # grown by NEAR cells, not more ...
     assert keep[28, 24, 1] and not keep[29, 24, 1]        # ... and in the floor band only by REACH (1)
     assert keep.mean() < (8 + 2 * NEAR) ** 2 * (40 + NEAR) / 64 ** 3   # the column grown by NEAR cells, nothing else
+
+
+def _wide_base(base_rgb) -> tuple[np.ndarray, np.ndarray]:
+    """The column of `_scene` under a round body and on a round base as wide, in the floor band's lower layers, a
+    shadow ring round the base: (alpha (g, g, g), rgb (g, g, g, 3) RGB); the object tan, the ground and the shadow
+    grey, the base `base_rgb`."""
+    alpha = _scene()
+    rgb = np.empty(alpha.shape + (3,), np.float32)
+    rgb[:] = (0.8, 0.6, 0.4)                      # the object (and the haze) tan
+    rgb[:, :, :3] = (0.2, 0.2, 0.2)               # the ground grey
+    x, y = np.meshgrid(np.arange(64), np.arange(64), indexing="ij")
+    r = np.hypot(x - 23.5, y - 23.5)              # from the column's axis
+    base, shadow = r <= 8.5, (r > 8.5) & (r <= 11.5)
+    alpha[base, 14:30] = 0.95                     # a body as wide as the base, on the column
+    alpha[base, 2:5], rgb[base, 2:5] = 0.95, base_rgb   # over the ground's texture, as a fit paints it
+    alpha[shadow, :6], rgb[shadow, :6] = 0.9, (0.2, 0.2, 0.2)   # painted a few layers up
+    return alpha, rgb
+
+
+def test_a_base_wider_than_what_stands_over_it_is_kept_where_its_colour_is_the_bodys():
+    alpha, rgb = _wide_base((0.75, 0.55, 0.4))
+    keep = object_cells(alpha, rgb)
+    assert keep[16, 24, 2] and keep[31, 24, 3] and keep[24, 29, 4]   # the base, beyond what stands over the band
+    assert not keep[15, 24, 3] and not keep[24, 35, 4]    # the shadow round it, solid too, in the ground's colour
+    assert not keep[5, 5, 1] and not keep[60, 40, 0]      # the ground away from it
+    assert not object_cells(alpha)[16, 24, 2]              # without the colours, the band keeps what stands only
+    assert (object_cells(alpha) <= keep).all()             # the colours only add cells
+
+
+def test_a_base_in_the_grounds_colour_stays_to_what_stands():
+    alpha, rgb = _wide_base((0.22, 0.2, 0.2))
+    np.testing.assert_array_equal(object_cells(alpha, rgb), object_cells(alpha))
+
+
+def test_a_base_is_not_widened_beyond_the_objects_footprint():
+    alpha, rgb = _wide_base((0.8, 0.6, 0.4))
+    alpha[24:, 20:28, 2:5], rgb[24:, 20:28, 2:5] = 0.95, (0.8, 0.6, 0.4)   # a strip in the body's colour, to the side
+    band = object_cells(alpha, rgb)[:, :, :5]
+    x, y = np.nonzero(band.any(axis=2))
+    assert np.hypot(x - 23.5, y - 23.5).max() <= 8.5 + FOOTPRINT + 1   # the body's footprint, grown as the rule says
+    assert band[31, 24, 2] and not band[40:, 24].any()
+
+
+def test_the_colours_decide_nothing_where_the_ground_is_the_bodys_colour():
+    alpha, rgb = _wide_base((0.8, 0.6, 0.4))
+    rgb[:, :, :3] = (0.8, 0.6, 0.4)               # the ground tan too: its colours are not told from the body's
+    np.testing.assert_array_equal(object_cells(alpha, rgb), object_cells(alpha))
 
 
 def test_nothing_solid_keeps_nothing():

@@ -135,6 +135,6 @@ def object_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tupl
     pre = replace(cfg, steps=max(10, round(cfg.steps * cfg.object_box)), background="outer", qat_fraction=0.0,
                   channel_fraction=0.0, object_steps=0.0)
     res = fit(posed, decoder, pre, device=device)
-    alpha = cell_alpha(res.state.planes.planes.detach(), decoder, posed.box, GRID)
-    box = cells_box(object_cells(alpha), posed.box)
+    alpha, rgb = cell_alpha(res.state.planes.planes.detach(), decoder, posed.box, GRID, with_rgb=True)
+    box = cells_box(object_cells(alpha, rgb), posed.box)
     return box, {"object_box_steps": pre.steps, "object_box_seconds": round(time.perf_counter() - t0, 1)}

@@ -7,9 +7,10 @@ After the fit, `object_cells` finds the object's cells in a grid of the planes' 
 the box (z up, its floor cut at the ground by `box_tighten`): the solid cells (opacity above SOLID), without those in
 the floor band (the lowest FLOOR_BAND of the box) over which nothing solid stands (no solid cell within REACH cells
 sideways in the ABOVE layers just over the band: a leg or a body resting on the ground keeps its cells, the ground's
-texture and the object's shadow round it do not); of those, the connected pieces at least KEEP_SHARE of the
-largest's size; then grown by NEAR cells, so that the object's soft edge stays, but not into the floor band
-beyond what stands there. `object_views` renders the training
+texture and the object's shadow round it do not), unless, given the cells' colours, they widen a base down
+the band in the lower body's colour rather than the ground's (`_widened_base`: the bunny's haunches); of those,
+the connected pieces at least KEEP_SHARE of the largest's size; then grown by NEAR cells, so that the object's
+soft edge stays, but not into the floor band beyond what stands there. `object_views` renders the training
 views of the fitted planes with every other cell skipped, over white, at the poses the fit refined; where a view is
 opaque its colour is the photo's (`photo_colours`): the planes of a fit with the ground in the box paint the ground's
 texture into the object's colour too (the plane over the floor is shared by every height), which the photo does not
@@ -31,7 +32,8 @@ from snapshot3d.posed import PosedImages
 
 __all__ = ["object_cells", "object_views", "object_config", "photo_colours", "refined_c2w", "PHOTO_RAMP", "SOLID",
            "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
-           "TEACHER_SIZE", "DISTIL_LR"]
+           "TEACHER_SIZE", "DISTIL_LR", "STEP_DOWN", "KNN", "GROUND_LAYERS",
+           "FOOTPRINT", "SEPARATE"]
 
 SOLID = 0.2         # one-cell opacity of an object's cell (0.5 cut half of a short fit's cloudy teapot)
 FLOOR_BAND = 0.1    # of the box's height: where the ground's texture and the shadow are painted
@@ -42,31 +44,82 @@ NEAR = 3            # cells the object's cells are grown by (2 cut the teapot's 
 TEACHER_SIZE = 400  # longer side, pixels, of the views the planes are fitted to (the capture's when smaller)
 DISTIL_LR = 0.03    # the planes' learning rate then, at the first step
 PHOTO_RAMP = (0.5, 0.9)   # the view's opacity over which its colour gives way to the photo's
+STEP_DOWN = 2       # cells sideways per layer by which a base may widen down through the floor band ...
+KNN = 5             # ... where its colour is nearer the lower body's than the ground's, by the KNN-th nearest
+GROUND_LAYERS = 2   # the lowest layers: outside what stands, their solid cells are the ground's colours
+SEPARATE = 0.8      # the share of the ground's colours the test must tell from the body's (bunny 0.87)
+FOOTPRINT = 3       # cells round the footprint of all that is solid above the band, which a base stays under
 
 
-def object_cells(alpha: np.ndarray, solid: float = SOLID, floor_band: float = FLOOR_BAND, above: float = ABOVE,
-                 reach: int = REACH, keep_share: float = KEEP_SHARE, near: int = NEAR) -> np.ndarray:
-    """alpha (G, G, G) [ix, iy, iz] one-cell opacity over the box (z up, its floor on the ground) -> (G, G, G)
-    bool, the object's cells (all False when nothing is solid)."""
+def object_cells(alpha: np.ndarray, rgb: np.ndarray | None = None, solid: float = SOLID,
+                 floor_band: float = FLOOR_BAND, above: float = ABOVE, reach: int = REACH,
+                 keep_share: float = KEEP_SHARE, near: int = NEAR) -> np.ndarray:
+    """alpha (G, G, G) [ix, iy, iz] one-cell opacity over the box (z up, its floor on the ground), rgb (G, G, G, 3)
+    RGB their colour or None -> (G, G, G) bool, the object's cells (all False when nothing is solid). With `rgb`,
+    the floor band also keeps the base where it widens (`_widened_base`)."""
     from skimage.measure import label
-    from skimage.morphology import isotropic_dilation
 
     cells = alpha > solid
     g = alpha.shape[2]
     band, top = math.ceil(floor_band * g), math.ceil((floor_band + above) * g)
     stands = cells[:, :, band:top].any(axis=2)
     if reach > 0:
-        stands = isotropic_dilation(stands, reach)
-    cells[:, :, :band] &= stands[:, :, None]
+        stands = _grow(stands, reach)
+    allowed = np.repeat(stands[:, :, None], band, axis=2)
+    if rgb is not None and 0 < band < top < g:
+        allowed |= _widened_base(cells, rgb, stands, band, top)
+    cells[:, :, :band] &= allowed
     pieces = label(cells, connectivity=3)
     sizes = np.bincount(pieces.ravel())[1:]
     if sizes.size == 0:
         return cells
     cells = np.isin(pieces, np.nonzero(sizes >= keep_share * sizes.max())[0] + 1)
     if near > 0:
-        cells = isotropic_dilation(cells, near)
-        cells[:, :, :band] &= stands[:, :, None]   # not grown into the ground round the feet
+        cells = _grow(cells, near)
+        cells[:, :, :band] &= allowed   # not grown into the ground round the feet
     return cells
+
+
+def _widened_base(cells: np.ndarray, rgb: np.ndarray, stands: np.ndarray, band: int, top: int) -> np.ndarray:
+    """(G, G, band) bool, the floor band's cells beyond `stands` (G, G) that belong to a base wider than what stands
+    over the band (the bunny's haunches and paws): from the band's top down, the solid cells within STEP_DOWN cells
+    sideways of those kept in the layer above and within FOOTPRINT cells of the footprint of all that is solid above
+    the band (a 16x4 fit's teapot, as grey as its ground, flooded it otherwise); of those, the ones whose colour is
+    nearer the lower body's (the solid cells of the band's height over `top`) than the ground's (the solid cells of
+    the lowest GROUND_LAYERS outside `stands`), by the KNN-th nearest of each in RGB; and the cells next to them in
+    their layer that are not solid (so that the object's edge there may grow). None when the ground's own colours
+    are told from the body's less often than SEPARATE by the same test (a 16x4 fit's teapot, 0.6 to 0.7). The
+    ground's texture and the object's shadow are the ground's colour, and the base of an object whose foot is that
+    colour (spot's hooves) stays to the rule without colour."""
+    from scipy.spatial import cKDTree
+
+    out = np.zeros(cells.shape[:2] + (band,), bool)
+    wider = np.zeros_like(out)
+    under = _grow(cells[:, :, band:].any(axis=2), FOOTPRINT)   # the object's footprint, above the band
+    allowed, kept = stands, cells[:, :, band] & stands
+    for z in range(band - 1, -1, -1):
+        allowed = allowed | (_grow(kept, STEP_DOWN) & under)
+        kept = cells[:, :, z] & allowed
+        wider[:, :, z] = kept & ~stands
+    body = rgb[:, :, top:top + band][cells[:, :, top:top + band]]
+    ground = rgb[:, :, :GROUND_LAYERS][cells[:, :, :GROUND_LAYERS] & ~stands[:, :, None]]   # the shadow too
+    if not wider.any() or len(body) <= KNN or len(ground) <= KNN:
+        return out
+    body_tree, ground_tree = cKDTree(body), cKDTree(ground)
+    told = ground_tree.query(ground, k=KNN + 1)[0][:, -1] < body_tree.query(ground, k=KNN)[0][:, -1]
+    if told.mean() < SEPARATE:   # the ground's own colours are not told from the body's
+        return out
+    colours = rgb[:, :, :band][wider]
+    out[wider] = body_tree.query(colours, k=KNN)[0][:, -1] <= ground_tree.query(colours, k=KNN)[0][:, -1]
+    beside = np.stack([_grow(out[:, :, z], 1) for z in range(band)], axis=2)
+    return out | (beside & ~cells[:, :, :band])
+
+
+def _grow(mask: np.ndarray, r: int) -> np.ndarray:
+    """`mask` dilated by a ball of radius r cells (skimage's isotropic_dilation sets one cell of an empty mask)."""
+    from skimage.morphology import isotropic_dilation
+
+    return isotropic_dilation(mask, r) if mask.any() else mask.copy()
 
 
 def photo_colours(views: np.ndarray, cover: np.ndarray, photos: np.ndarray,
@@ -109,7 +162,8 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     from .sampler import BoxFrame
 
     box = np.asarray(posed.box, np.float32)
-    keep = torch.from_numpy(object_cells(cell_alpha(planes, decoder, box, formats.OCC_RES))).to(planes.device)
+    keep = torch.from_numpy(object_cells(*cell_alpha(planes, decoder, box, formats.OCC_RES, with_rgb=True)))
+    keep = keep.to(planes.device)
     if not bool(keep.any()):
         return None
     frame = BoxFrame.from_box(box, planes.device)

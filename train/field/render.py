@@ -34,14 +34,17 @@ def occupancy_from_planes(planes: Tensor, decoder, frame: BoxFrame, res: int = f
 
 
 @torch.no_grad()
-def cell_alpha(planes: torch.Tensor, decoder, box: np.ndarray, g: int = formats.OCC_RES) -> np.ndarray:
-    """(g, g, g) opacity of one cell of the planes over `box` at the cells' centres."""
+def cell_alpha(planes: torch.Tensor, decoder, box: np.ndarray, g: int = formats.OCC_RES, with_rgb: bool = False):
+    """(g, g, g) [ix, iy, iz] opacity of one cell of the planes over `box` at the cells' centres; with `with_rgb`, also
+    their colour (g, g, g, 3) RGB in [0, 1]."""
     frame = BoxFrame.from_box(box, planes.device)
     t = (np.arange(g) + 0.5) / g * 2 - 1
     unit = torch.from_numpy(np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3).astype(np.float32))
-    sigma = torch.cat([decode(sample_planes(planes, u.to(planes.device)), decoder)[0] for u in unit.split(1 << 16)])
+    out = [decode(sample_planes(planes, u.to(planes.device)), decoder) for u in unit.split(1 << 16)]
+    sigma = torch.cat([o[0] for o in out])
     cell_q = float((2 * frame.half_unit / g).mean())
-    return (1 - torch.exp(-sigma * cell_q)).cpu().numpy().reshape(g, g, g)
+    alpha = (1 - torch.exp(-sigma * cell_q)).cpu().numpy().reshape(g, g, g)
+    return (alpha, torch.cat([o[1] for o in out]).cpu().numpy().reshape(g, g, g, 3)) if with_rgb else alpha
 
 
 def render_rays(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor | None, o: Tensor, d: Tensor,
