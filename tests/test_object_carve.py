@@ -82,6 +82,12 @@ def test_nothing_solid_keeps_nothing():
     assert not object_cells(np.full((16, 16, 16), 0.1, np.float32)).any()
 
 
+def test_a_ground_with_nothing_standing_on_it_keeps_nothing():
+    alpha = np.full((64, 64, 64), 0.05, np.float32)
+    alpha[:, :, :3] = 0.9                 # the ground's texture alone (skimage dilates an empty mask to one cell)
+    assert not object_cells(alpha).any()
+
+
 def test_the_steps_are_checked_in_one_line():
     with pytest.raises(UserError, match="--object-steps"):
         check_fit_config(FitConfig(background="outer", object_steps=-0.5))
