@@ -94,6 +94,14 @@ def _widened_base(cells: np.ndarray, rgb: np.ndarray, stands: np.ndarray, band: 
     from scipy.spatial import cKDTree
 
     out = np.zeros(cells.shape[:2] + (band,), bool)
+    body = rgb[:, :, top:top + band][cells[:, :, top:top + band]]
+    ground = rgb[:, :, :GROUND_LAYERS][cells[:, :, :GROUND_LAYERS] & ~stands[:, :, None]]   # the shadow too
+    if len(body) <= KNN or len(ground) <= KNN:
+        return out
+    body_tree, ground_tree = cKDTree(body), cKDTree(ground)
+    told = ground_tree.query(ground, k=KNN + 1)[0][:, -1] < body_tree.query(ground, k=KNN)[0][:, -1]
+    if told.mean() < SEPARATE:   # the ground's own colours are not told from the body's
+        return out
     wider = np.zeros_like(out)
     under = _grow(cells[:, :, band:].any(axis=2), FOOTPRINT)   # the object's footprint, above the band
     allowed, kept = stands, cells[:, :, band] & stands
@@ -101,13 +109,7 @@ def _widened_base(cells: np.ndarray, rgb: np.ndarray, stands: np.ndarray, band: 
         allowed = allowed | (_grow(kept, STEP_DOWN) & under)
         kept = cells[:, :, z] & allowed
         wider[:, :, z] = kept & ~stands
-    body = rgb[:, :, top:top + band][cells[:, :, top:top + band]]
-    ground = rgb[:, :, :GROUND_LAYERS][cells[:, :, :GROUND_LAYERS] & ~stands[:, :, None]]   # the shadow too
-    if not wider.any() or len(body) <= KNN or len(ground) <= KNN:
-        return out
-    body_tree, ground_tree = cKDTree(body), cKDTree(ground)
-    told = ground_tree.query(ground, k=KNN + 1)[0][:, -1] < body_tree.query(ground, k=KNN)[0][:, -1]
-    if told.mean() < SEPARATE:   # the ground's own colours are not told from the body's
+    if not wider.any():
         return out
     colours = rgb[:, :, :band][wider]
     out[wider] = body_tree.query(colours, k=KNN)[0][:, -1] <= ground_tree.query(colours, k=KNN)[0][:, -1]
