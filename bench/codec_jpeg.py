@@ -25,7 +25,7 @@ from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
 from snapshot3d.train.codec.hinet import load_codec, restore_secret
 from snapshot3d.train.codec.refine import snapshot_of
 from snapshot3d.viewer.render import render_views
-from snapshot3d.viewer.runtime import field_models
+from snapshot3d.viewer.runtime import scene_models
 
 from .common import jpeg_copy, pyplot, write_report
 
@@ -85,7 +85,7 @@ def bench_codec_jpeg_command(args) -> int:
         return 0
     scene = load_scene_file(asset("spot.s3d"))
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, SIZE)
-    models = field_models(decoder=scene.decoder_version)
+    models = scene_models(scene)
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, SIZE, SIZE)
     rows = []
     runs = [("shipped", None, 0), *([(f"shipped, refined {args.refine}", None, args.refine)] if args.refine else []),

@@ -85,14 +85,14 @@ class E2E:
 
     def __init__(self, scene, views: int = 5):
         from snapshot3d.loaders import load_scene
-        from snapshot3d.train.field.decoder import load_decoder
+        from snapshot3d.train.field.decoder import scene_decoder
 
         src = scene.meta.get("source", "")
         kw = {"size": scene.meta.get("size", 200)} if src.startswith("builtin:") else \
             {"downscale": scene.meta.get("downscale", 4)}
         self.posed = load_scene(src, **kw)
         self.views = self.posed.test[np.linspace(0, len(self.posed.test) - 1, views).round().astype(int)]
-        self.decoder = load_decoder(scene.decoder_version)
+        self.decoder = scene_decoder(scene)
 
     def psnr(self, planes: np.ndarray) -> float:
         from snapshot3d.train.field.evaluate import evaluate_planes

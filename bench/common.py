@@ -155,9 +155,9 @@ class ViewJudge:
 
     def __init__(self, scene, size: int):
         from snapshot3d.cameras import orbit_cameras
-        from snapshot3d.train.field.decoder import load_decoder
+        from snapshot3d.train.field.decoder import scene_decoder
 
-        self.scene, self.size, self.decoder = scene, size, load_decoder(scene.decoder_version)
+        self.scene, self.size, self.decoder = scene, size, scene_decoder(scene)
         self.cams = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
         self.ref = self.views(scene.planes())
 

@@ -43,7 +43,7 @@ from snapshot3d.scene import load_scene_file, quantize_planes
 from snapshot3d.viewer.decode import decode_photo
 from snapshot3d.viewer.quality import VIEWS_PREDICTOR, calibration_file, predictor_value
 from snapshot3d.viewer.render import RenderConfig, render_views
-from snapshot3d.viewer.runtime import field_models
+from snapshot3d.viewer.runtime import scene_models
 
 from .common import pyplot, run_metadata, write_rows
 
@@ -61,7 +61,7 @@ CHECK_HOSTS = ("builtin:coffee", "builtin:chelsea")          # and is scored on 
 
 def _reference(scene, size: int) -> np.ndarray:
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
-    return render_views(field_models(decoder=scene.decoder_version), scene.planes(), scene.box, c2w, intr, size, size)
+    return render_views(scene_models(scene), scene.planes(), scene.box, c2w, intr, size, size)
 
 
 def _ground_truth(scene, size: int) -> np.ndarray:

@@ -11,8 +11,8 @@ FILE (.npz) holds, for the snapshot file `tests/data/spot-snapshot.png`:
 - `planes` float32 (3, C, R, R): the scene's planes after the documented unspread and 8-bit rounding;
 - `project_interp` float32 (B, R), `project_tables` float32 (3, B*B, 32): the project graph's input
   (with `planes` zero-padded to 12 channels) and output, B = 16;
-- `field_rows` int64 (M, 3), `field_density_logit` float32 (M,), `field_rgb` float32 (M, 3): the field
-  graph's input (with `project_tables`) and outputs for M = 64 grid cells;
+- `field_rows` int64 (M, 3), `field_density_logit` float32 (M,), `field_rgb` float32 (M, 3), `field_hidden`
+  float32 (M, 32): the field graph's input (with `project_tables`) and outputs for M = 64 grid cells;
 - `meta` (text): the snapshot's metadata payload (the QR text);
 - `mark_slots` int32 (6200,) and `mark_dither` float64 (6627,): the pixel mark's slot permutation (the first
   6200 entries, all any frame uses) and its dithers per slot in units of the frame's step;
@@ -78,9 +78,10 @@ def render_vectors(models: dict, planes: np.ndarray) -> dict:
     cells = np.random.default_rng(0).integers(0, GRID, (POINTS, 3))
     rows = np.stack([cells[:, 1] * GRID + cells[:, 0], cells[:, 2] * GRID + cells[:, 0],
                      cells[:, 2] * GRID + cells[:, 1]], 1).astype(np.int64)
-    logit, colour = session(str(models["field"])).run(None, {"tables": tables, "rows": rows})
+    logit, colour, hidden = session(str(models["field"])).run(["density_logit", "rgb", "hidden"],
+                                                              {"tables": tables, "rows": rows})
     return {"project_interp": interp, "project_tables": tables, "field_cells": cells.astype(np.int64),
-            "field_rows": rows, "field_density_logit": logit, "field_rgb": colour}
+            "field_rows": rows, "field_density_logit": logit, "field_rgb": colour, "field_hidden": hidden}
 
 
 def print_vectors(graph_path, photo: Path | None = None) -> dict:

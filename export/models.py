@@ -12,7 +12,8 @@
     projected to the hidden width first and then resampled: two small matrix products.
   - `FieldGraph`: tables (3, T, H), rows (M, 3) int64 (the row of each plane's table for each point)
     -> density_logit (M,) (clamped at `formats.DENSITY_CLAMP`; density = exp(logit)) and rgb (M, 3)
-    in [0, 1]: the rest of the decoder, a gather and two small layers per point.
+    in [0, 1]: the rest of the decoder, a gather and two small layers per point; and hidden (M, H), the
+    last hidden layer's activations, for a scene with a head of its own (`snapshot3d.head.apply_head`).
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ __all__ = ["RestoreGraph", "ProjectGraph", "FieldGraph", "RESTORE_INPUTS", "REST
 
 RESTORE_INPUTS, RESTORE_OUTPUTS = ["snapshot"], ["secret"]
 PROJECT_INPUTS, PROJECT_OUTPUTS = ["planes", "interp"], ["tables"]
-FIELD_INPUTS, FIELD_OUTPUTS = ["tables", "rows"], ["density_logit", "rgb"]
+FIELD_INPUTS, FIELD_OUTPUTS = ["tables", "rows"], ["density_logit", "rgb", "hidden"]
 
 
 class RestoreGraph(nn.Module):
@@ -57,7 +58,8 @@ class FieldGraph(nn.Module):
         super().__init__()
         self.decoder = decoder
 
-    def forward(self, tables: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
+    def forward(self, tables: Tensor, rows: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         h = self.decoder.l0.bias + tables[0][rows[:, 0]] + tables[1][rows[:, 1]] + tables[2][rows[:, 2]]
-        out = self.decoder.tail(F.relu(h))
-        return torch.clamp(out[:, 0], max=formats.DENSITY_CLAMP), torch.sigmoid(out[:, 1:4])
+        hidden = self.decoder.hidden_out(F.relu(h))
+        out = self.decoder.head_out(hidden)
+        return torch.clamp(out[:, 0], max=formats.DENSITY_CLAMP), torch.sigmoid(out[:, 1:4]), hidden

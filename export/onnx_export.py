@@ -50,7 +50,8 @@ DOCS = {
                "the decoder's width (tri-dec-1: 32, tri-dec-2: 64; decoder_version in this graph's metadata).",
     "field": "renderer, part 2. Inputs tables: float32 (3, T, H) from project (H the decoder's width); rows: int64 (M, 3), the table row of each "
              "point in each plane. Outputs density_logit: float32 (M,) (density = exp, clamped at 15); rgb: float32 "
-             "(M, 3) in [0, 1].",
+             "(M, 3) in [0, 1]; hidden: float32 (M, H), the last hidden layer, for a scene with its own head "
+             "(metadata h=): out = hidden W^T + b, density_logit = min(out0, 15), rgb = sigmoid(out1..3).",
 }
 
 
@@ -135,7 +136,7 @@ def export_project(decoder, path: Path, version: str = formats.DECODER_VERSION) 
 def export_field(decoder, path: Path, version: str = formats.DECODER_VERSION) -> int:
     """The renderer's field graph of `decoder` (version `version`)."""
     tables = torch.rand(3, 96 * 96, decoder.hidden)
-    dynamic = {"tables": {1: "T"}, "rows": {0: "M"}, "density_logit": {0: "M"}, "rgb": {0: "M"}}
+    dynamic = {"tables": {1: "T"}, "rows": {0: "M"}, "density_logit": {0: "M"}, "rgb": {0: "M"}, "hidden": {0: "M"}}
     return _export(FieldGraph(decoder).eval(), (tables, torch.randint(0, 96 * 96, (2048, 3))), FIELD_INPUTS,
                    FIELD_OUTPUTS, dynamic, path, "field", decoder=version)
 

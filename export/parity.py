@@ -19,13 +19,14 @@ def _spot():
 class TorchRun:
     """An onnxruntime session's `run`, computed by the torch graph it was exported from."""
 
-    def __init__(self, graph, inputs):
-        self.graph, self.inputs = graph.eval(), inputs
+    def __init__(self, graph, inputs, outputs):
+        self.graph, self.inputs, self.outputs = graph.eval(), inputs, outputs
 
-    def run(self, _, feeds):
+    def run(self, names, feeds):
         with torch.no_grad():
             out = self.graph(*(torch.from_numpy(np.asarray(feeds[k])) for k in self.inputs))
-        return [t.numpy() for t in (out if isinstance(out, tuple) else (out,))]
+        got = dict(zip(self.outputs, (t.numpy() for t in (out if isinstance(out, tuple) else (out,)))))
+        return [got[k] for k in (names or self.outputs)]
 
 
 def torch_field_models(decoder: str = formats.DECODER_VERSION):
@@ -33,10 +34,11 @@ def torch_field_models(decoder: str = formats.DECODER_VERSION):
     from snapshot3d.train.field.decoder import load_decoder
     from snapshot3d.viewer.runtime import FieldModels
 
-    from .models import FIELD_INPUTS, PROJECT_INPUTS, FieldGraph, ProjectGraph
+    from .models import FIELD_INPUTS, FIELD_OUTPUTS, PROJECT_INPUTS, PROJECT_OUTPUTS, FieldGraph, ProjectGraph
 
     dec = load_decoder(decoder)
-    return FieldModels(TorchRun(ProjectGraph(dec), PROJECT_INPUTS), TorchRun(FieldGraph(dec), FIELD_INPUTS))
+    return FieldModels(TorchRun(ProjectGraph(dec), PROJECT_INPUTS, PROJECT_OUTPUTS),
+                       TorchRun(FieldGraph(dec), FIELD_INPUTS, FIELD_OUTPUTS))
 
 
 def _ort_field_models(project_path, field_path):
@@ -69,7 +71,7 @@ def restore_parity(restore_path, size: int = 96, codec: str = formats.FILE_CODEC
     from snapshot3d.scene import dequantize_planes, quantize_planes
     from snapshot3d.train.codec.hinet import codec_path, embed_planes, load_codec, restore_secret
     from snapshot3d.viewer.render import render_views
-    from snapshot3d.viewer.runtime import field_models, session
+    from snapshot3d.viewer.runtime import scene_models, session
 
     scene = _spot()
     net, _ = load_codec(codec_path(codec))
@@ -77,7 +79,7 @@ def restore_parity(restore_path, size: int = 96, codec: str = formats.FILE_CODEC
     sec_torch = restore_secret(net, snap)
     sec_ort = session(str(restore_path)).run(None, {"snapshot": snapshot_nchw(snap)})[0][0]
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
-    models = field_models(decoder=scene.decoder_version)
+    models = scene_models(scene)
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, size, size)
 
     def score(secret):
@@ -103,12 +105,12 @@ def print_parity(graph_path, size: int = 96, severity: str = "moderate") -> dict
     from snapshot3d.scanner.roundtrip import capture
     from snapshot3d.scene import dequantize_planes, load_scene_file, quantize_planes
     from snapshot3d.viewer.render import render_views
-    from snapshot3d.viewer.runtime import field_models, session
+    from snapshot3d.viewer.runtime import scene_models, session
 
     scene = load_scene_file(asset("spot-print.s3d"))
     r, c = scene.resolution, scene.channels
     c2w, intr = orbit_cameras(scene.orbit, formats.ORBIT_VIEWS, size)
-    models = field_models(decoder=scene.decoder_version)
+    models = scene_models(scene)
     ref = render_views(models, scene.planes(), scene.box, c2w, intr, size, size)
     graph = session(str(graph_path))
     out = {}

@@ -1,8 +1,9 @@
 """The sheet's QR code: payload text <-> metadata, and drawing/reading it with OpenCV 5.
 
 Payload (`formats` QR_*): "S3D<version>|<codec id>[|b=x0,y0,z0,x1,y1,z1][|o=radius,elevation,fov]
-[|t=x,y,z][|p=R,C][|s=strength][|d=N]" (orbit target, plane resolution and channels, embedding strength,
-shared decoder `tri-dec-N`: absent on sheets of `tri-dec-1` scenes, which older builds made).
+[|t=x,y,z][|p=R,C][|s=strength][|d=N][|h=step,codes]" (orbit target, plane resolution and channels, embedding
+strength, shared decoder `tri-dec-N`: absent on sheets of `tri-dec-1` scenes, which older builds made; the scene's
+own head, `snapshot3d.head`: absent where the scene uses the shared decoder's last layer).
 The same text travels in a snapshot file's metadata (PNG text chunk or JPEG comment)."""
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import cv2
 import numpy as np
 
 from snapshot3d import formats, validate
+from snapshot3d.head import HEAD_KEY, parse_head
 from snapshot3d.codecs.media import CODEC_MEDIUM, MEDIA
 from snapshot3d.errors import UserError
 
@@ -40,6 +42,8 @@ class SheetMeta:
     """embedding strength the snapshot was made with, or None (1)"""
     decoder: int | None = None
     """N of the shared decoder `tri-dec-N` the scene was fitted for, or None (1: older sheets)"""
+    head: str | None = None
+    """the scene's own head, the h= field's text `step,codes` (`snapshot3d.head`), or None (the shared one)"""
 
     @property
     def decoder_version(self) -> str:
@@ -50,7 +54,7 @@ class SheetMeta:
                 "box": list(self.box) if self.box else None, "orbit": list(self.orbit) if self.orbit else None,
                 "target": list(self.target) if self.target else None,
                 "planes": list(self.planes) if self.planes else None, "strength": self.strength,
-                "decoder": self.decoder}
+                "decoder": self.decoder, "head": self.head}
 
 
 def _nums(values) -> str:
@@ -71,6 +75,8 @@ def encode_payload(meta: SheetMeta) -> str:
         parts.append("s=" + _nums([meta.strength]))
     if meta.decoder is not None:
         parts.append(f"d={int(meta.decoder)}")
+    if meta.head is not None:
+        parts.append(f"{HEAD_KEY}={meta.head}")
     text = formats.QR_SEP.join(parts)
     if any(formats.QR_SEP in p for p in parts[1:2]):
         raise ValueError(f"codec id must not contain {formats.QR_SEP!r}")
@@ -93,9 +99,13 @@ def decode_payload(text: str) -> SheetMeta:
     if len(parts) < 2 or not parts[0].startswith(formats.QR_MAGIC) or not (version.isascii() and version.isdigit()
                                                                            and len(version) <= 6):
         raise ValueError(f"not a snapshot3d QR payload: {text[:40]!r}")
-    fields = {}
+    fields, head = {}, None
     for p in parts[2:]:
         key, _, val = p.partition("=")
+        if key == HEAD_KEY:
+            parse_head(val)   # ValueError naming what is malformed
+            head = val
+            continue
         if key not in _LENGTHS:
             continue
         try:
@@ -120,7 +130,7 @@ def decode_payload(text: str) -> SheetMeta:
             raise ValueError(f"malformed field d= in QR payload (an integer in 0..65535 expected): {text[:60]!r}")
         decoder = int(fields["d"][0])
     return SheetMeta(int(version), parts[1], fields.get("b"), fields.get("o"), fields.get("t"), planes, strength,
-                     decoder)
+                     decoder, head)
 
 
 def check_meta(meta: SheetMeta, where: str = "the snapshot's metadata", require_codec: bool = True,
@@ -199,13 +209,13 @@ def check_codec(meta: SheetMeta, chart: bool = False) -> None:
 
 def scene_meta(scene, codec: str = MEDIA[formats.DEFAULT_MEDIUM].codec, strength: float | None = 1.0) -> SheetMeta:
     """What a snapshot of `scene` (`snapshot3d.scene.Scene`) made with `codec` carries as metadata: box,
-    orbit, plane size, embedding strength."""
+    orbit, plane size, embedding strength, decoder version and the scene's own head."""
     o = scene.orbit
     return SheetMeta(codec=codec, box=tuple(float(v) for v in np.asarray(scene.box).ravel()),
                      orbit=(float(o.radius), float(o.elevation_deg), float(o.fov_deg)),
                      target=tuple(float(v) for v in o.target), planes=(scene.resolution, scene.channels),
                      strength=None if strength is None else float(strength),
-                     decoder=_decoder_field(scene.decoder_version))
+                     decoder=_decoder_field(scene.decoder_version), head=getattr(scene, "head", None))
 
 
 def _decoder_field(version: str) -> int | None:

@@ -7,7 +7,7 @@ Every failure is a one-line `UserError` naming its cause."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -22,10 +22,11 @@ from .colour import apply_colour, fit_colour, linear_lut, marker_contrast
 from .detect import detect_markers, make_detector, refine_corners
 from .diagnose import SHARPNESS_MIN, exposure_problem, sharpness
 from .fit import Fit, fit_geometry
+from .headcode import join_head
 from .imageio_safe import read_image_bgr
 from .pilot import pilot_psnr
-from .qr import check_meta, decode_payload, read_qr
-from .rectify import OVERSAMPLE, photo_px_per_unit, rectify_sheet
+from .qr import check_meta, decode_payload, encode_payload, read_qr
+from .rectify import OVERSAMPLE, photo_px_per_unit, rectify_box, rectify_sheet
 
 __all__ = ["ScanResult", "scan_image", "scan_file", "refuse_snapshot_file", "DETECT_SIDE", "MIN_SNAPSHOT_PX", "REPORT_KEYS"]
 
@@ -33,7 +34,9 @@ DETECT_SIDE = 1400        # longest side of the detection copy (pixels)
 DETECT_MIN_SIDE = 64      # shortest side of the detection copy (pixels)
 MIN_SNAPSHOT_PX = 380     # at least one photo pixel per snapshot pixel: below, the snapshot is aliased
 MIN_CONTRAST = 0.3        # (paper - marker ink) / paper below this: washed out
-QR_MODULES = (21, 25, 29, 33)  # QR versions 1-4: the sheet's payloads fit these
+QR_MODULES = (21, 25, 29, 33, 37, 41)  # QR versions 1-6: the sheet's payloads fit these (its head codes: 5)
+HEAD_CODE_SCALE = 6      # px per layout unit the head codes are read at, from the photo
+HEAD_CODE_SPREAD = 40.0  # grey levels between the 10th and 90th percentile over which a head code's square holds one
 REPORT_KEYS = ("detected", "corners", "reprojection_px", "confidence", "pilot_psnr", "qr", "timings_ms")
 
 
@@ -180,7 +183,7 @@ def scan_image(img: np.ndarray, chart: bool = False) -> ScanResult:
     pilot = pilot_psnr(lo, model, mids)
     t["colour"] = (time.perf_counter() - t1) * 1e3
     t1 = time.perf_counter()
-    qr = _read_qr(hi, model, chart)
+    qr = _read_qr(hi, img, fit, chart)
     t["qr"] = (time.perf_counter() - t1) * 1e3
     t["total"] = (time.perf_counter() - t0) * 1e3
     rms_snap = fit.rms_px / photo_px_per_unit(fit)
@@ -199,37 +202,86 @@ def _halve(x: np.ndarray) -> np.ndarray:
     return (x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2]) * 0.25
 
 
-def _read_qr(hi: np.ndarray, model: dict, chart: bool = False) -> dict | None:
-    """Read the QR from the rectified sheet (OVERSAMPLE px per unit); UserError on a wrong codec id."""
-    sx0, sy0 = formats.SHEET_BOX[:2]
-    qx0, qy0, qx1, qy1 = formats.QR_BOX
-    o, pad = OVERSAMPLE, 4
-    crop = hi[(qy0 - pad - sy0) * o:(qy1 + pad - sy0) * o, (qx0 - pad - sx0) * o:(qx1 + pad - sx0) * o]
-    gray = cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY).astype(np.float32)
-    lo, hi_ = np.percentile(gray, (2, 98))
-    gray = np.clip((gray - lo) / max(hi_ - lo, 1.0) * 255.0, 0, 255).astype(np.uint8)
-    gray = cv2.copyMakeBorder(gray, 24, 24, 24, 24, cv2.BORDER_CONSTANT, value=255)
-    text = read_qr(gray) or read_qr(cv2.resize(gray, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC))
-    if text is None:  # the code's square is known exactly: sample its module grid and redraw it cleanly
-        side = (qx1 - qx0) * o
-        for n in QR_MODULES:
-            c = 24 + pad * o + (np.arange(n) + 0.5) * side / n - 0.5  # module centres in the bordered crop
-            mx, my = np.meshgrid(c.astype(np.float32), c.astype(np.float32))
-            v = cv2.remap(gray, mx, my, cv2.INTER_LINEAR)
-            lo_, hi2 = np.percentile(v, (10, 90))
-            modules = np.where(v > (lo_ + hi2) / 2, 255, 0).astype(np.uint8)
-            clean = cv2.copyMakeBorder(cv2.resize(modules, (n * 8, n * 8), interpolation=cv2.INTER_NEAREST),
-                                       32, 32, 32, 32, cv2.BORDER_CONSTANT, value=255)
-            text = read_qr(clean)
-            if text:
-                break
+def _read_qr(hi: np.ndarray, img: np.ndarray, fit: Fit, chart: bool = False) -> dict | None:
+    """Read the QR from the rectified sheet (OVERSAMPLE px per unit), and a scene's own head from the codes beside
+    it when the sheet has them (from the photo `img` through `fit`); UserError on a wrong codec id, or head codes
+    that cannot be read."""
+    text = _main_code(hi)
     if text is None:
         return None
     try:
         meta = decode_payload(text)
     except ValueError as e:
         raise UserError(f"the QR code on the sheet is not a snapshot3d code ({e})") from None
+    if meta.head is None and not chart and _has_head_codes(hi):
+        parts = [_head_code(img, fit, box) for box in formats.HEAD_CODE_BOXES]
+        try:
+            if None in parts:
+                raise ValueError("unreadable")
+            meta = replace(meta, head=join_head(parts))
+            decode_payload(encode_payload(meta))   # the head's own checks
+        except ValueError:
+            raise UserError("found the sheet but could not read the two small codes beside its QR code (they hold the "
+                            "scene's own decoder head); retake the photo closer and sharper") from None
     return check_meta(meta, "the sheet's QR code", chart=chart).as_dict()
+
+
+def _stretch(gray: np.ndarray) -> np.ndarray:
+    """Grey levels stretched so that the 2nd and 98th percentiles span 0..255 (uint8)."""
+    gray = gray.astype(np.float32)
+    lo, hi_ = np.percentile(gray, (2, 98))
+    return np.clip((gray - lo) / max(hi_ - lo, 1.0) * 255.0, 0, 255).astype(np.uint8)
+
+
+def _main_code(hi: np.ndarray) -> str | None:
+    """The text of the sheet's QR code, read from the rectified sheet (OVERSAMPLE px per unit), or None."""
+    sx0, sy0 = formats.SHEET_BOX[:2]
+    qx0, qy0, qx1, qy1 = formats.QR_BOX
+    o, pad = OVERSAMPLE, 4
+    crop = hi[(qy0 - pad - sy0) * o:(qy1 + pad - sy0) * o, (qx0 - pad - sx0) * o:(qx1 + pad - sx0) * o]
+    return _read_code(_stretch(cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY)), (qx1 - qx0) * o, pad * o)
+
+
+def _head_code(img: np.ndarray, fit: Fit, box) -> str | None:
+    """The text of a head code, read from the photo itself at HEAD_CODE_SCALE px per unit (its modules are
+    narrower than the QR code's), or None."""
+    pad, k = 4, HEAD_CODE_SCALE
+    x0, y0, x1, y1 = box
+    crop = rectify_box(img, fit, (x0 - pad, y0 - pad, x1 + pad, y1 + pad), k)
+    return _read_code(_stretch(crop), (x1 - x0) * k, pad * k)
+
+
+def _has_head_codes(hi: np.ndarray) -> bool:
+    """Whether the head codes' squares hold codes (a sheet without a head leaves them blank paper): their grey
+    spread against the paper's, in the raw rectified sheet."""
+    sx0, sy0 = formats.SHEET_BOX[:2]
+    o, spreads = OVERSAMPLE, []
+    for qx0, qy0, qx1, qy1 in formats.HEAD_CODE_BOXES:
+        crop = hi[(qy0 - sy0) * o:(qy1 - sy0) * o, (qx0 - sx0) * o:(qx1 - sx0) * o].astype(np.float32).mean(2)
+        spreads.append(float(np.percentile(crop, 90) - np.percentile(crop, 10)))
+    return min(spreads) > HEAD_CODE_SPREAD
+
+
+def _read_code(gray: np.ndarray, side: float, pad: int) -> str | None:
+    """The text of the QR code in a grey crop (`_stretch`ed) whose code square is `side` pixels with `pad` pixels
+    round it, or None."""
+    gray = cv2.copyMakeBorder(gray, 24, 24, 24, 24, cv2.BORDER_CONSTANT, value=255)
+    text = read_qr(gray) or read_qr(cv2.resize(gray, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC))
+    if text is None:  # the code's square is known exactly: sample its module grid and redraw it cleanly
+        for n in QR_MODULES:
+            c = 24 + pad + (np.arange(n) + 0.5) * side / n - 0.5  # module centres in the bordered crop
+            mx, my = np.meshgrid(c.astype(np.float32), c.astype(np.float32))
+            v = cv2.remap(gray, mx, my, cv2.INTER_LINEAR)
+            lo_, hi2 = np.percentile(v, (10, 90))
+            local = cv2.remap(cv2.GaussianBlur(gray.astype(np.float32), (0, 0), 4 * side / n), mx, my, cv2.INTER_LINEAR)
+            for threshold in ((lo_ + hi2) / 2, local):   # one level, then the level round each module (uneven light)
+                modules = np.where(v > threshold, 255, 0).astype(np.uint8)
+                clean = cv2.copyMakeBorder(cv2.resize(modules, (n * 8, n * 8), interpolation=cv2.INTER_NEAREST),
+                                           32, 32, 32, 32, cv2.BORDER_CONSTANT, value=255)
+                text = read_qr(clean)
+                if text:
+                    return text
+    return text
 
 
 def refuse_snapshot_file(path, img: np.ndarray) -> None:

@@ -1,4 +1,5 @@
-"""The printable sheet (DESIGN 1.3): snapshot, corner ArUco markers, colour patches, QR code, quiet zone.
+"""The printable sheet (DESIGN 1.3): snapshot, corner ArUco markers, colour patches, QR code (and a scene's own
+head in two smaller codes beside it, `headcode`), quiet zone.
 
 The sheet image is the layout (`scanner.layout`, `formats` "sheet and scan") drawn at an integer
 number of dots per snapshot pixel, so that every snapshot pixel prints as a crisp k x k block and a
@@ -7,7 +8,7 @@ from __future__ import annotations
 
 import io
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -18,6 +19,7 @@ from snapshot3d.codecs.media import CODEC_MEDIUM
 from snapshot3d.errors import UserError
 
 from . import layout
+from .headcode import split_head
 from .imageio_safe import read_image_bgr, write_atomic
 from .qr import SheetMeta, encode_payload, qr_matrix, scene_meta
 
@@ -62,11 +64,12 @@ def render_sheet(snapshot: np.ndarray, meta: SheetMeta, k: int) -> np.ndarray:
         r0, r1 = round((by0 - y0) * k), round((by1 - y0) * k)
         c0, c1 = round((bx0 - x0) * k), round((bx1 - x0) * k)
         sheet[r0:r1, c0:c1] = np.round(np.array(colour) * 255).astype(np.uint8)
-    qx0, qy0, qx1, _ = formats.QR_BOX
-    modules = qr_matrix(encode_payload(meta))
-    side = (qx1 - qx0) * k
-    qr = cv2.resize(modules, (side, side), interpolation=cv2.INTER_NEAREST)
-    put(qr, qx0, qy0)
+    codes = [(formats.QR_BOX, encode_payload(replace(meta, head=None)))]
+    if meta.head is not None:   # the scene's own head: two smaller codes beside the QR code (scanner.headcode)
+        codes += list(zip(formats.HEAD_CODE_BOXES, split_head(meta.head)))
+    for (qx0, qy0, qx1, _), text in codes:
+        side = (qx1 - qx0) * k
+        put(cv2.resize(qr_matrix(text), (side, side), interpolation=cv2.INTER_NEAREST), qx0, qy0)
     return sheet
 
 

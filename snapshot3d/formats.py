@@ -12,7 +12,8 @@ __all__ = [
     "SNAPSHOT_SIZE", "SHEET_FORMAT_VERSION", "FILE_CODEC", "FILE_CODECS", "PRINT_CODEC", "PRINT_CODECS", "MEDIA",
     "MARK_CODECS", "DEFAULT_MEDIUM", "FILE_REFINE_STEPS", "FILE_SCALE", "CODEC_CHANNELS", "CODEC_MAX_RES", "CODEC_LEVELS", "CODEC_GRID", "ARUCO_DICT", "SHEET_MARKER_IDS", "MARKER_SIZE",
     "MARKER_GAP", "MARGIN_X", "MARGIN_Y", "COLUMN_LEFT", "COLUMN_RIGHT", "SHEET_BOX", "MARKER_ORIGINS",
-    "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "QR_MAGIC", "QR_SEP", "QR_FIELDS",
+    "PATCH_COLOURS", "PATCH_ROWS", "PATCH_COLS", "PATCH_BOX", "QR_BOX", "HEAD_CODE_SIZE", "HEAD_CODE_BOXES",
+    "QR_MAGIC", "QR_SEP", "QR_FIELDS",
     "SEVERITIES",
 ]
 
@@ -92,6 +93,12 @@ PATCH_BOX = (COLUMN_LEFT, MARKER_SIZE + MARKER_GAP + 4, COLUMN_LEFT + MARKER_SIZ
              SNAPSHOT_SIZE - MARKER_SIZE - MARKER_GAP - 4)   # (x0, y0, x1, y1) of the patch grid
 QR_BOX = (COLUMN_RIGHT, (SNAPSHOT_SIZE - MARKER_SIZE) // 2, COLUMN_RIGHT + MARKER_SIZE,
           (SNAPSHOT_SIZE + MARKER_SIZE) // 2)                # the QR code's square, quiet zone outside it
+# A scene's own head (`snapshot3d.head`) on a sheet: two smaller QR codes in the right column, above and below the
+# QR code, each HEAD_CODE_SIZE square and at least 6 units from the markers and the QR code (`scanner.headcode`).
+HEAD_CODE_SIZE = 60
+HEAD_CODE_BOXES = tuple((COLUMN_RIGHT + (MARKER_SIZE - HEAD_CODE_SIZE) // 2, y0,
+                         COLUMN_RIGHT + (MARKER_SIZE - HEAD_CODE_SIZE) // 2 + HEAD_CODE_SIZE, y0 + HEAD_CODE_SIZE)
+                        for y0 in (MARKER_SIZE + 6, SNAPSHOT_SIZE - MARKER_SIZE - 6 - HEAD_CODE_SIZE))
 # QR payload: fields joined by QR_SEP; the first two are always present, the rest optional:
 #   "S3D<version>", codec id, "b=" scene box x0,y0,z0,x1,y1,z1, "o=" orbit radius,elevation_deg,fov_deg.
 QR_MAGIC = "S3D"

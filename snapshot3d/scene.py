@@ -14,6 +14,7 @@ import numpy as np
 
 from . import formats, scene_io, validate
 from .errors import UserError
+from .head import head_bytes, parse_head
 
 __all__ = ["Scene", "Orbit", "save_scene", "load_scene_file", "check_orbit", "check_scene", "quantize_planes",
            "dequantize_planes"]
@@ -40,6 +41,8 @@ class Scene:
     decoder_version: str = formats.DECODER_VERSION
     name: str = ""
     meta: dict = field(default_factory=dict)
+    head: str | None = None
+    """the scene's own head (`snapshot3d.head`, the h= text `step,codes`), or None: the shared decoder's"""
 
     def __post_init__(self):
         if self.codes.dtype != np.uint8 or self.codes.ndim != 4 or self.codes.shape[0] != 3:
@@ -61,8 +64,10 @@ class Scene:
         return dequantize_planes(self.codes)
 
     def carried_bytes(self) -> int:
-        """Bytes the snapshot must carry: 8-bit codes, the box (6 float32), the orbit (3 float32)."""
-        return int(self.codes.size) + 6 * 4 + 3 * 4
+        """Bytes the snapshot must carry: 8-bit codes, the box (6 float32), the orbit (3 float32), and the
+        scene's own head when it has one (`head.head_bytes`)."""
+        own = 0 if self.head is None else head_bytes(parse_head(self.head)[1].shape[1] - 1)
+        return int(self.codes.size) + 6 * 4 + 3 * 4 + own
 
     @property
     def scene_kb(self) -> float:
@@ -88,6 +93,7 @@ def save_scene(scene: Scene, path) -> None:
     header = {
         "format_version": formats.SCENE_FORMAT_VERSION, "decoder_version": scene.decoder_version,
         "name": scene.name, "orbit": asdict(scene.orbit), "meta": scene.meta,
+        **({"head": scene.head} if scene.head is not None else {}),
     }
     tmp = path.with_name(path.name + ".partial")
     try:
@@ -131,8 +137,15 @@ def load_scene_file(path, expect_decoder: tuple | None = formats.DECODERS) -> Sc
     name, meta = header.get("name", ""), header.get("meta", {})
     if not isinstance(name, str) or not isinstance(meta, dict):
         raise UserError(f"{path}: header name must be a text and meta an object")
+    head = header.get("head")
+    if head is not None:
+        try:
+            parse_head(head)
+        except ValueError as e:
+            raise UserError(f"{path}: header {e}") from None
     return Scene(codes=arrays["codes"], box=validate.check_box(arrays["box"], f"{path}: box"),
-                 orbit=check_orbit(header.get("orbit"), f"{path}: orbit"), decoder_version=dec, name=name, meta=meta)
+                 orbit=check_orbit(header.get("orbit"), f"{path}: orbit"), decoder_version=dec, name=name, meta=meta,
+                 head=head)
 
 
 _ARRAYS = {

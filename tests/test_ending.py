@@ -29,7 +29,7 @@ def _scorer(channel_bonus: float):
     20 + `channel_bonus`; records the planes it saw."""
     seen = []
 
-    def score(planes):
+    def score(planes, decoder):
         seen.append(planes)
         return 20.0 + (channel_bonus if len(seen) == 2 else 0.0)
     return score, seen

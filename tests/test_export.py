@@ -29,7 +29,9 @@ from snapshot3d.train.codec.hinet import load_codec
 from snapshot3d.train.field.decoder import load_decoder
 from snapshot3d.train.field.field import decode, sample_planes
 from snapshot3d.viewer.bake import cell_coords, grid_field
-from snapshot3d.viewer.runtime import FieldModels
+from snapshot3d.head import encode_head
+from snapshot3d.train.field.head import with_head
+from snapshot3d.viewer.runtime import FieldModels, own_head
 
 
 def _export_field_models(tmp_path, version=formats.DECODER_VERSION):
@@ -45,7 +47,7 @@ def test_grid_field_graphs_match_the_reference_field(tmp_path, version):
     cells' centres, for another R and grid size than exported with, for every decoder version this build reads."""
     project, field = _export_field_models(tmp_path, version)
     for path, names_in, names_out in ((project, ["planes", "interp"], ["tables"]),
-                                      (field, ["tables", "rows"], ["density_logit", "rgb"])):
+                                      (field, ["tables", "rows"], ["density_logit", "rgb", "hidden"])):
         model = onnx.load(str(path))
         meta = {p.key: p.value for p in model.metadata_props}
         assert meta["decoder_version"] == version and meta["opset"] == str(OPSET)
@@ -63,6 +65,20 @@ def test_grid_field_graphs_match_the_reference_field(tmp_path, version):
         logit, got_rgb = grid_field(models, planes, res, cells)
         assert np.allclose(np.minimum(logit, formats.DENSITY_CLAMP), want[0], rtol=1e-5, atol=1e-4)  # logits reach 40
         assert np.abs(got_rgb - want[1]).max() < 1e-4
+    # a scene's own head (snapshot3d.head): the runtime's numpy head on the graph's hidden output == the torch
+    # decoder with that last layer
+    dec = load_decoder(version)
+    text = encode_head(rng.normal(0, 0.05, (4, dec.hidden + 1)))
+    with torch.no_grad():
+        sigma, rgb = decode(sample_planes(torch.from_numpy(planes), torch.from_numpy(c[cells])), with_head(dec, text))
+    want_head = torch.log(sigma).numpy(), rgb.numpy()
+    assert np.abs(want_head[1] - want[1]).max() > 1e-2   # the head changes the field
+    own, tm = own_head(version, text), torch_field_models(version)
+    for models in (FieldModels(ort.InferenceSession(str(project)), ort.InferenceSession(str(field)), own),
+                   FieldModels(tm.project, tm.field, own)):
+        logit, got_rgb = grid_field(models, planes, res, cells)
+        assert np.allclose(np.minimum(logit, formats.DENSITY_CLAMP), want_head[0], rtol=1e-5, atol=1e-4)
+        assert np.abs(got_rgb - want_head[1]).max() < 1e-4
 
 
 def test_exported_models_match_torch_on_real_inputs(tmp_path):

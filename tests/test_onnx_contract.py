@@ -10,6 +10,7 @@ import onnxruntime as ort
 import pytest
 
 from snapshot3d import formats
+from snapshot3d.paths import asset
 from snapshot3d.viewer.runtime import model_path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -164,10 +165,16 @@ def test_renderer_graphs_reproduce_the_vectors(vectors):
     ix, iy, iz = cells.T
     rows = np.stack([iy * b + ix, iz * b + ix, iz * b + iy], 1).astype(np.int64)  # the page's rows
     assert np.array_equal(rows, vectors["field_rows"])
-    logit, rgb = _session("field").run(None, {"tables": tables, "rows": rows})
+    logit, rgb, hidden = _session("field").run(["density_logit", "rgb", "hidden"], {"tables": tables, "rows": rows})
     assert _close(logit, vectors["field_density_logit"])
     assert _close(rgb, vectors["field_rgb"]) and rgb.min() >= 0 and rgb.max() <= 1
     assert logit.max() <= 15.0
+    assert hidden.shape == (len(rows), 32) and _close(hidden, vectors["field_hidden"]) and hidden.min() >= 0
+    # the page's head on `hidden`, with the shared decoder's last layer, gives the graph's own outputs
+    with np.load(asset("decoder-tri-dec-1.npz")) as z:
+        w, b = z["l2.weight"], z["l2.bias"]
+    out = hidden @ w.T + b
+    assert _close(np.minimum(out[:, 0], 15.0), logit) and _close(1 / (1 + np.exp(-out[:, 1:4])), rgb)
 
 
 def _print_feeds(vectors):

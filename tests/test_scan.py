@@ -53,7 +53,7 @@ def test_lossless_round_trip(sheet, snapshot):
     assert np.abs(res.corners - np.array(truth["corners"])).max() < 0.05
     assert res.qr == {"version": 1, "codec": MEDIA[formats.DEFAULT_MEDIUM].codec, "box": [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0],
                       "orbit": [3.0, 20.0, 40.0], "target": None, "planes": None, "strength": None,
-                      "decoder": None}
+                      "decoder": None, "head": None}
     assert tuple(res.report()) == REPORT_KEYS and res.confidence > 0.9
 
 

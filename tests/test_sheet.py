@@ -25,11 +25,14 @@ def test_layout_is_consistent():
     x0, y0, x1, y1 = formats.SHEET_BOX
     n = formats.SNAPSHOT_SIZE
     # everything inside the sheet, the quiet zone around it, nothing overlapping the snapshot
-    boxes = [formats.PATCH_BOX, formats.QR_BOX] + [(q[0, 0], q[0, 1], q[2, 0], q[2, 1])
-                                                   for q in layout.marker_corners().values()]
+    boxes = [formats.PATCH_BOX, formats.QR_BOX, *formats.HEAD_CODE_BOXES] + [(q[0, 0], q[0, 1], q[2, 0], q[2, 1])
+                                                                           for q in layout.marker_corners().values()]
     for bx0, by0, bx1, by1 in boxes:
         assert x0 < bx0 < bx1 < x1 and y0 < by0 < by1 < y1
         assert bx1 <= 0 or bx0 >= n  # left or right of the snapshot
+    for i, a in enumerate(boxes):   # at least 6 units between any two (the scanner's crops take 4 round a code)
+        for b in boxes[i + 1:]:
+            assert a[2] + 6 <= b[0] or b[2] + 6 <= a[0] or a[3] + 6 <= b[1] or b[3] + 6 <= a[1], (a, b)
     assert formats.SNAPSHOT_SIZE == 380 and len(formats.PATCH_COLOURS) == formats.PATCH_ROWS * formats.PATCH_COLS
     assert h / n < 1.11  # thin top and bottom margins: the snapshot can fill ~60% of a 4:3 frame
 

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from snapshot3d import formats
+from snapshot3d.head import apply_head
 
 from .march import Frame
 
@@ -74,7 +75,11 @@ def grid_field(models, planes12: np.ndarray, res: int, cells: np.ndarray, chunk:
     interp = interp_matrix(cell_coords(res), planes12.shape[-1])
     tables = models.project.run(None, {"planes": planes12, "interp": interp})[0]
     rows = np.stack([cells[:, b] * res + cells[:, a] for a, b in formats.PLANE_AXES], 1).astype(np.int64)
-    outs = [models.field.run(None, {"tables": tables, "rows": rows[i:i + chunk]}) for i in range(0, len(rows), chunk)]
+    head = getattr(models, "head", None)
+    names = ["density_logit", "rgb"] if head is None else ["hidden"]
+    outs = [models.field.run(names, {"tables": tables, "rows": rows[i:i + chunk]}) for i in range(0, len(rows), chunk)]
+    if head is not None:   # the scene's own last layer on the shared decoder's last hidden layer (snapshot3d.head)
+        outs = [apply_head(o[0], head) for o in outs]
     return np.concatenate([o[0] for o in outs]), np.concatenate([o[1] for o in outs])
 
 

@@ -27,7 +27,7 @@ from .media import restore_planes
 from .quality import quality_estimate
 from .quality_views import error_spectrum, views_psnr_expected
 from .render import RenderConfig, pad_planes, render_views
-from .runtime import field_models
+from .runtime import scene_models
 
 __all__ = ["Decoded", "DecodedScene", "decode_scene", "decode_photo", "scene_from_meta", "read_input",
            "restore_checked"]
@@ -49,7 +49,7 @@ def scene_from_meta(codes: np.ndarray, meta) -> Scene:
     else:
         r, el, fov = float(np.linalg.norm(box[1] - box[0])), formats.ORBIT_ELEVATION_DEG, formats.ORBIT_FOV_DEG
     return Scene(codes=codes, box=box, orbit=Orbit(r, el, fov, target), name="decoded",
-                 decoder_version=meta.decoder_version)
+                 decoder_version=meta.decoder_version, head=meta.head)
 
 
 def _meta(qr: dict | None):
@@ -131,7 +131,7 @@ def _views_psnr(scene: Scene, planes: np.ndarray, codec: str, info: dict) -> flo
         return None
     err = error_spectrum(codec, planes.shape[2], planes.shape[1], info["pilot_gain"], info["pilot_noise"],
                          info["plane_rmse_expected"])
-    return views_psnr_expected(field_models(decoder=scene.decoder_version), planes, scene.box, scene.orbit, err)
+    return views_psnr_expected(scene_models(scene), planes, scene.box, scene.orbit, err)
 
 
 def _with_estimate(ds: "DecodedScene", timings: dict, channel, estimate) -> dict:
@@ -166,7 +166,7 @@ def _scene(path, cfg: RenderConfig):
     planes, codec_info = restore_checked(snapshot, meta)
     t2 = time.perf_counter()
     scene = scene_from_meta(quantize_planes(planes), meta)
-    baked = bake_field(field_models(decoder=scene.decoder_version), pad_planes(planes), Frame.from_box(scene.box),
+    baked = bake_field(scene_models(scene), pad_planes(planes), Frame.from_box(scene.box),
                        cfg.bake)
     t3 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731
@@ -178,7 +178,8 @@ def _scene(path, cfg: RenderConfig):
         "codec": meta.codec, "medium": CODEC_MEDIUM[meta.codec],
         "quality_estimate": None,   # `estimate` below, after the views
         "channel": None,   # `channel` below, after the views
-        "planes": list(meta.planes), "decoder": scene.decoder_version, "render": cfg.__dict__,
+        "planes": list(meta.planes), "decoder": scene.decoder_version, "own_head": scene.head is not None,
+        "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
         "scan": None if res is None else {k: v for k, v in res.report().items()
                                           if k in ("corners", "reprojection_px", "qr")},
@@ -208,7 +209,7 @@ def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORB
             first.append(time.perf_counter())
         if on_view is not None:
             on_view(i)
-    out = render_views(field_models(decoder=ds.scene.decoder_version), ds.planes, ds.scene.box, c2w, intr, size, size, cfg, baked=ds.baked,
+    out = render_views(scene_models(ds.scene), ds.planes, ds.scene.box, c2w, intr, size, size, cfg, baked=ds.baked,
                        on_view=_tick)
     t4 = time.perf_counter()
     ms = lambda a, b: round((b - a) * 1e3, 1)  # noqa: E731

@@ -23,7 +23,7 @@ def demo_command(args) -> int:
     from .commands import write_outputs
     from .decode import decode_photo
     from .render import render_views
-    from .runtime import field_models
+    from .runtime import scene_models
 
     photo, original = asset(EXAMPLE_PHOTO), load_scene_file(asset(EXAMPLE_SCENE))
     out = Path(args.output)
@@ -31,7 +31,7 @@ def demo_command(args) -> int:
           f"severity moderate) ...", flush=True)
     dec = decode_photo(photo)
     c2w, intr = orbit_cameras(original.orbit, formats.ORBIT_VIEWS, formats.ORBIT_SIZE)
-    ref = render_views(field_models(decoder=original.decoder_version), original.planes(), original.box, c2w, intr,
+    ref = render_views(scene_models(original), original.planes(), original.box, c2w, intr,
                        formats.ORBIT_SIZE, formats.ORBIT_SIZE)
     dec.report["restore_psnr"] = round(psnr(dec.views, ref), 2)
     out.mkdir(parents=True, exist_ok=True)

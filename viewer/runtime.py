@@ -11,20 +11,26 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
+import numpy as np
+
 from snapshot3d import formats
 from snapshot3d.errors import UserError
+from snapshot3d.head import head_weights, shared_head
 from snapshot3d.paths import asset, model_file
 
-__all__ = ["FieldModels", "field_models", "model_path", "session", "model_metadata"]
+__all__ = ["FieldModels", "field_models", "scene_models", "model_path", "session", "model_metadata", "own_head"]
 
 
 @dataclass(frozen=True)
 class FieldModels:
     """The renderer's two graphs (onnxruntime sessions, or anything with their `run`): `project`
-    (planes, interp -> tables) and `field` (tables, rows -> density_logit, rgb); see `export.models`."""
+    (planes, interp -> tables) and `field` (tables, rows -> density_logit, rgb, hidden); see `export.models`.
+    `head`: (4, H + 1) float32, the scene's own last layer (`snapshot3d.head`) applied to `hidden`, or None
+    (the graph's own outputs, the shared decoder's)."""
 
     project: object
     field: object
+    head: np.ndarray | None = None
 
 
 def model_path(kind: str, codec: str | None = None, decoder: str | None = None) -> Path:
@@ -33,10 +39,32 @@ def model_path(kind: str, codec: str | None = None, decoder: str | None = None) 
     return asset(model_file(kind, codec, decoder))
 
 
-def field_models(threads: int | None = None, decoder: str = formats.DECODER_VERSION) -> FieldModels:
-    """The project and field graphs of decoder version `decoder` (a scene's `decoder_version`)."""
+def field_models(threads: int | None = None, decoder: str = formats.DECODER_VERSION,
+                 head: str | None = None) -> FieldModels:
+    """The project and field graphs of decoder version `decoder` (a scene's `decoder_version`), with the scene's
+    own head when `head` (its h= text) is given."""
     return FieldModels(session(str(model_path("project", decoder=decoder)), threads),
-                       session(str(model_path("field", decoder=decoder)), threads))
+                       session(str(model_path("field", decoder=decoder)), threads),
+                       None if head is None else own_head(decoder, head))
+
+
+def scene_models(scene, threads: int | None = None) -> FieldModels:
+    """`field_models` of a scene (`snapshot3d.scene.Scene`): its decoder version's graphs and its own head."""
+    return field_models(threads, scene.decoder_version, scene.head)
+
+
+def own_head(decoder: str, text: str) -> np.ndarray:
+    """A scene's head text (the h= field) for decoder version `decoder` -> its last layer (4, H + 1) float32.
+    UserError (one line) when the text does not fit that decoder."""
+    path = asset(f"decoder-{decoder}.npz")
+    if not path.is_file():
+        raise UserError(f"decoder {decoder} is not installed ({path})")
+    with np.load(path) as z:
+        shared = shared_head(dict(z))
+    try:
+        return head_weights(shared, text)
+    except ValueError as e:
+        raise UserError(f"the scene's head does not fit decoder {decoder}: {e}") from None
 
 
 @lru_cache(maxsize=16)

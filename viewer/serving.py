@@ -23,7 +23,7 @@ from .decode import DecodedScene, decode_scene
 from .gridfile import encode_grid
 from .march import Frame
 from .render import RenderConfig, pad_planes, render_views
-from .runtime import field_models
+from .runtime import scene_models
 
 __all__ = ["BakedCache", "write_scene", "png_bytes", "render_png", "orbit_view_png", "mesh_file"]
 
@@ -49,7 +49,7 @@ class BakedCache:
                 self._items.move_to_end(sid)
                 return self._items[sid]
         scene = load_scene_file(folder / "scene.s3d")
-        baked = bake_field(field_models(decoder=scene.decoder_version), pad_planes(scene.planes()),
+        baked = bake_field(scene_models(scene), pad_planes(scene.planes()),
                            Frame.from_box(scene.box), cfg.bake)
         self.put(sid, scene, baked)
         return scene, baked
@@ -84,7 +84,7 @@ def png_bytes(rgb01: np.ndarray) -> bytes:
 
 
 def _render(scene, baked: Baked, c2w, intr, size: int, cfg: RenderConfig) -> np.ndarray:
-    return render_views(field_models(decoder=scene.decoder_version), None, scene.box, c2w, intr, size, size, cfg, baked=baked)[0]
+    return render_views(scene_models(scene), None, scene.box, c2w, intr, size, size, cfg, baked=baked)[0]
 
 
 def render_png(scene, baked: Baked, azimuth: float, elevation: float, distance: float | None, size: int,

@@ -32,6 +32,7 @@ from .curves import CURVES_FILE, PREDICT_HOSTS, codec_psnr, print_channel
 from .ending import Ending, ending_noise, ending_views
 from .evaluate import evaluate_planes
 from .fit import fit, hull_grid
+from .head import with_head
 
 __all__ = ["fit_ladder", "choose_rung", "codec_psnr", "expected_e2e", "codec_share", "ladder_for", "print_channel",
            "predicted_e2e", "CURVES_FILE", "PREDICT_HOSTS"]
@@ -102,7 +103,7 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
         ending = None
         if channel is not None and cfg.ending == "auto":   # train/field/ending.py
             ending = Ending(ending_noise(res, ch, channel, device, cfg.channel_noise),
-                            lambda planes: predicted_e2e(planes, decoder, posed, channel, views=ending_views(posed)))
+                            lambda planes, dec: predicted_e2e(planes, dec, posed, channel, views=ending_views(posed)))
         res_ = fit(posed, decoder, rcfg, init_planes=init, hull=hull, device=device,
                    progress=progress_factory(f"R={res} C={ch}", rcfg.steps) if progress_factory else None,
                    object_bar=(lambda n, r=res, c=ch: progress_factory(f"R={r} C={c} object alone", n))
@@ -111,18 +112,19 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
         if big is None:
             big = torch.from_numpy(dequantize_planes(res_.codes))
         scoring = {"background": res_.state.background, "samples": cfg.background_samples}
-        ev = evaluate_planes(dequantize_planes(res_.codes), decoder, posed, **scoring)
+        own = with_head(decoder, res_.head)   # the scene's own head, as carried, when it has one
+        ev = evaluate_planes(dequantize_planes(res_.codes), own, posed, **scoring)
         scoring["masks"] = ev.get("masks")   # a print's restored planes are scored on the field's own object pixels
-        kb = Scene(codes=res_.codes, box=posed.box, orbit=Orbit(radius=1.0)).scene_kb
+        kb = Scene(codes=res_.codes, box=posed.box, orbit=Orbit(radius=1.0), head=res_.head).scene_kb
         rungs.append({"plane_res": res, "plane_channels": ch, "scene_kb": round(kb, 2),
                       "field_psnr": round(ev["field_psnr"], 3), "field_ssim": round(ev["field_ssim"], 4),
-                      "fit_seconds": round(seconds, 1), "codes": res_.codes,
+                      "fit_seconds": round(seconds, 1), "codes": res_.codes, "head": res_.head,
                       **({"ending": res_.ending} if res_.ending else {})})
         if medium is not None:
             c = codec_psnr(medium, int(res_.codes.size))
             rungs[-1].update(codec_psnr=round(c, 3), e2e_expected=round(expected_e2e(ev["field_psnr"], c), 3))
             if channel is not None:  # the scene's own planes through the print channel's model
-                e2e = predicted_e2e(dequantize_planes(res_.codes), decoder, posed, channel, **scoring)
+                e2e = predicted_e2e(dequantize_planes(res_.codes), own, posed, channel, **scoring)
                 rungs[-1].update(codec_psnr_curve=rungs[-1]["codec_psnr"], e2e_expected=round(e2e, 3),
                                  codec_psnr=round(codec_share(ev["field_psnr"], e2e), 3))
         tail = ""

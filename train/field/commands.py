@@ -73,6 +73,8 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         cfg, chose = replace(cfg, background=mode), f"{mode} ({why})"
         if mode == "outer" and (capture is None or capture.box is None):
             posed = with_overlap_box(posed)
+    if cfg.head == "auto":   # the QR code carries a print's head; a file's planes are large enough without one
+        cfg = replace(cfg, head="on" if medium == "print" else "off")
     if cfg.refine_poses == "auto":   # poses from a solver or an app are a little off; builtin and Blender's are exact
         cfg = replace(cfg, refine_poses="on" if posed.info.get("layout") in ("nerfstudio", "colmap") else "off")
     read = posed.info.get("capture")
@@ -85,6 +87,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     from .decoder import load_decoder
     from .evaluate import evaluate_planes
     from .fit import fit
+    from .head import with_head
 
     device = resolve_device(device) if isinstance(device, str) else device
     decoder = load_decoder(cfg.decoder).to(device or "cpu")
@@ -97,7 +100,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     if budget == "auto":
         chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device, medium=medium,
                                    channel=channel)
-        codes = rungs[chosen]["codes"]
+        codes, head = rungs[chosen]["codes"], rungs[chosen]["head"]
         ev = {k: rungs[chosen][k] for k in ("field_psnr", "field_ssim")}
         steps = cfg.steps
         ev["renders"] = None
@@ -107,8 +110,8 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     elif budget == "fixed":
         res = fit(posed, decoder, cfg, checkpoint=checkpoint, progress=bars("fit", cfg.steps) if bars else None,
                   device=device, object_bar=(lambda n: bars("object alone", n)) if bars else None)
-        codes, steps = res.codes, cfg.steps
-        ev = evaluate_planes(dequantize_planes(codes), decoder, posed, background=res.state.background,
+        codes, steps, head = res.codes, cfg.steps, res.head
+        ev = evaluate_planes(dequantize_planes(codes), with_head(decoder, head), posed, background=res.state.background,
                              samples=cfg.background_samples)
         report["_throughput"] = {"rays_per_s": res.state.rays / max(res.seconds, 1e-9),
                                  "samples_per_s": res.state.samples / max(res.seconds, 1e-9)}
@@ -119,12 +122,14 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         raise UserError(f"--budget must be 'fixed' or 'auto', not {budget!r}")
     seconds = time.perf_counter() - t0
     scene = Scene(codes=codes, box=posed.box, orbit=_default_orbit(posed), name=posed.name, decoder_version=cfg.decoder,
+                  head=head,
                   meta={"source": spec, "train_views": int(len(posed.train)), "test_views": int(len(posed.test)),
                         **({"size": size} if spec.startswith("builtin:") else {"downscale": downscale}),
                         **({"medium": medium} if medium else {})})
     report = {"field_psnr": round(float(ev["field_psnr"]), 3), "field_ssim": round(float(ev["field_ssim"]), 4),
               "scene_kb": round(scene.scene_kb, 2), "fit_seconds": round(seconds, 1), "steps": steps,
-              "plane_res": scene.resolution, "plane_channels": scene.channels, **report}
+              "plane_res": scene.resolution, "plane_channels": scene.channels,
+              "head": "the scene's own" if scene.head else "the shared decoder's", **report}
     if read and not spec.startswith("builtin:"):   # a builtin scene's split and box are fixed by its name and size
         report["field_psnr_on"] = "training frames (--holdout 0)" if read["holdout"] == 0 else "held-out frames"
         if cfg.background == "outer":
@@ -188,7 +193,8 @@ def fit_command(args) -> int:
     write_json(args.report, report)
     extra = f", {throughput['rays_per_s']:.0f} rays/s" if throughput else ""
     print(f"wrote {out}: field_psnr {report['field_psnr']:.2f} dB, field_ssim {report['field_ssim']:.3f}, "
-          f"{report['scene_kb']:.1f} kB (R={scene.resolution}, C={scene.channels}), {report['fit_seconds']:.0f} s{extra}")
+          f"{report['scene_kb']:.1f} kB (R={scene.resolution}, C={scene.channels}"
+          f"{', its own decoder head' if scene.head else ''}), {report['fit_seconds']:.0f} s{extra}")
     if args.medium is None and (hint := payload_hint(formats.DEFAULT_MEDIUM, scene)) is not None:
         print(f"{hint} (embed makes a print unless given --medium file)")   # what plain fit, then embed, would lose
     return 0
@@ -217,11 +223,11 @@ def render_scene(scene: Scene, views: int, size: int, show_progress: bool = True
     """The scene's orbit views (views, size, size, 3) float32 RGB in [0, 1] (torch reference renderer)."""
     import torch
 
-    from .decoder import load_decoder
+    from .decoder import scene_decoder
     from .render import render_views
     c2w, intr = orbit_cameras(scene, views, size)
     bar = progress(views, "render", unit="view") if show_progress else None
-    out = render_views(torch.from_numpy(scene.planes()), load_decoder(scene.decoder_version), scene.box, c2w, intr,
+    out = render_views(torch.from_numpy(scene.planes()), scene_decoder(scene), scene.box, c2w, intr,
                        size, size, progress=(lambda i: bar.update(1)) if bar else None)
     if bar:
         bar.close()
@@ -247,7 +253,7 @@ def mesh_command(args) -> int:
 
     from snapshot3d.meshing import density_to_mesh, unit_grid, write_mesh
 
-    from .decoder import load_decoder
+    from .decoder import scene_decoder
     from .field import decode, sample_planes
     from .sampler import BoxFrame
 
@@ -255,7 +261,7 @@ def mesh_command(args) -> int:
     scene = load_scene_file(args.scene)
     if not str(args.output).lower().endswith((".glb", ".ply")):
         raise UserError(f"{args.output}: mesh output must end in .glb or .ply")
-    decoder = load_decoder(scene.decoder_version)
+    decoder = scene_decoder(scene)
     planes = torch.from_numpy(scene.planes())
     pts = torch.from_numpy(unit_grid(args.res))
     chunks = pts.split(1 << 16)

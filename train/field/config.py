@@ -38,6 +38,10 @@ class FitConfig:
                                "(--qat-fraction) both plain and through the print channel model's noise, and keeps "
                                "the second where the model expects it at least 0.3 dB better at held-out views "
                                "(train/field/ending.py; not with --background outer); plain: the plain ending alone")
+    head: str = config_field("auto", "a head of the scene's own: the shared decoder's last layer refitted for this "
+                             "scene and carried in its metadata (132 bytes for tri-dec-1; docs/fitting.md); auto: on "
+                             "with --medium print, where the planes are small and the QR code carries it")
+    head_lr: float = config_field(3e-3, "with --head on: the head's learning rate (decayed as the planes')")
     fg_fraction: float = config_field(0.75, "share of each batch drawn from rays that see the object (when masks exist)")
     tv_weight: float = config_field(1e-4, "total-variation weight on the planes")
     empty_weight: float = config_field(1.0, "weight of the density penalty at random points outside the visual hull")
@@ -130,7 +134,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("plane-channels", 1 <= cfg.plane_channels <= formats.C_MAX, f"in 1..{formats.C_MAX}"),
         ("plane-res", cfg.plane_res >= 2, ">= 2"),
         *((k, v(k) >= 1, ">= 1") for k in ("steps", "batch-rays", "occ-every", "checkpoint-every")),
-        *((k, v(k) > 0, "> 0") for k in ("lr", "lr-final", "pose-lr", "background-lr")),
+        *((k, v(k) > 0, "> 0") for k in ("lr", "lr-final", "pose-lr", "background-lr", "head-lr")),
         *((k, 0 <= v(k) <= 1, "in [0, 1]") for k in ("qat-fraction", "channel-fraction", "fg-fraction")),
         *((k, 0 <= v(k) < 1, "in [0, 1)") for k in ("min-transmittance", "pose-start")),
         *((k, v(k) >= 0, ">= 0") for k in ("channel-noise", "ground-depth", "distortion-weight", "opacity-weight",
@@ -151,7 +155,8 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
                 for k, ok, what in _ranges(cfg) if not ok]
     for option, value, allowed in (("ending", cfg.ending, ("auto", "plain")),
                                    ("background", cfg.background, ("auto", "white", "outer")),
-                                   ("refine-poses", cfg.refine_poses, ("auto", "on", "off"))):
+                                   ("refine-poses", cfg.refine_poses, ("auto", "on", "off")),
+                                   ("head", cfg.head, ("auto", "on", "off"))):
         if value not in allowed:
             problems.append(f"--{option} must be {', '.join(allowed[:-1])} or {allowed[-1]}, not {value!r}")
     if cfg.decoder not in formats.DECODERS:

@@ -22,7 +22,7 @@ from .config import LADDER_PRINT, DecoderConfig, FitConfig
 from .field import Decoder
 from .fit import new_state, train_step
 
-__all__ = ["DecoderConfig", "train_decoder", "load_decoder", "decoder_path"]
+__all__ = ["DecoderConfig", "train_decoder", "load_decoder", "decoder_path", "scene_decoder"]
 
 
 def decoder_path(version: str = formats.DECODER_VERSION) -> Path:
@@ -39,6 +39,13 @@ def load_decoder(version: str = formats.DECODER_VERSION) -> Decoder:
     for p in dec.parameters():
         p.requires_grad_(False)
     return dec
+
+
+def scene_decoder(scene) -> Decoder:
+    """The decoder a scene (`snapshot3d.scene.Scene`) renders with: its shared version's, with the scene's own head
+    when it has one (`head.with_head`)."""
+    from .head import with_head
+    return with_head(load_decoder(scene.decoder_version), scene.head)
 
 
 def _channel_noise_fn(cfg: DecoderConfig, res: int, channels: int, responses: dict, gen: torch.Generator, device):

@@ -31,8 +31,9 @@ class Ending:
 
     channel: tuple
     """(D, a, s) as `FitState.channel`: the DCT matrix, a gain of ones, the noise per coefficient"""
-    score: Callable[[np.ndarray], float]
-    """planes (3, C, R, R) float32 -> the e2e_psnr a print of them is expected to give (dB)"""
+    score: Callable[[np.ndarray, object], float]
+    """planes (3, C, R, R) float32 and the decoder they are read with (the scene's own head, when it has one) ->
+    the e2e_psnr a print of them is expected to give (dB)"""
 
 
 def ending_noise(res: int, channels: int, channel, device=None, scale: float = 1.0) -> tuple:

@@ -91,8 +91,16 @@ class Decoder(nn.Module):
 
     def tail(self, h: Tensor) -> Tensor:
         """The layers after l0's ReLU: (N, hidden) -> (N, 4) density logit and rgb logits."""
+        return self.head_out(self.hidden_out(h))
+
+    def hidden_out(self, h: Tensor) -> Tensor:
+        """l0's ReLU output (N, hidden) -> the last hidden layer's activations (N, hidden), what the head reads."""
         for i in range(1, self.layers):
             h = F.relu(getattr(self, f"l{i}")(h))
+        return h
+
+    def head_out(self, h: Tensor) -> Tensor:
+        """The head, the last layer: (N, hidden) -> (N, 4) density logit and rgb logits."""
         return getattr(self, f"l{self.layers}")(h)
 
     def state_arrays(self) -> dict[str, np.ndarray]:

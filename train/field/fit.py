@@ -51,6 +51,8 @@ class FitState:
     poses: torch.nn.Module | None = None
     """`pose_refine.PoseRefine` of the training views with cfg.refine_poses (never written to the snapshot), else None"""
     pose_opt: torch.optim.Optimizer | None = None
+    head: torch.nn.Module | None = None
+    """`head.HeadDecoder`, the decoder with the scene's own last layer (in `opt`), with cfg.head "on", else None"""
 
 
 @dataclass
@@ -61,6 +63,8 @@ class FitResult:
     log: list = field(default_factory=list)
     ending: dict | None = None
     """with `fit(..., ending=)`: which last phase was kept and what the model expected of each"""
+    head: str | None = None
+    """with cfg.head "on": the scene's own head as carried (the h= text, `snapshot3d.head`)"""
 
 
 def hull_grid(posed: PosedImages, res: int = formats.OCC_RES) -> torch.Tensor | None:
@@ -139,7 +143,10 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     what a medium restores); `plane_fn` maps the planes the decoder reads (after both) to others."""
     t0 = time.perf_counter()
     for g in st.opt.param_groups:
-        g["lr"] = lr_at(cfg, st.step)
+        g["lr"] = lr_at(cfg, st.step) * g.get("scale", 1.0)
+    if st.head is not None:   # the scene's own head in place of the shared decoder's last layer
+        decoder = st.head
+        st.head.quantize = st.step >= cfg.steps * (1 - cfg.qat_fraction)
     if st.bg_opt is not None:
         for g in st.bg_opt.param_groups:
             g["lr"] = lr_at(cfg, st.step) * cfg.background_lr / cfg.lr
@@ -213,7 +220,9 @@ def _save_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, s
                 "rays": st.rays, "samples": st.samples,
                 **({"background": st.background.state_dict(), "bg_opt": st.bg_opt.state_dict()}
                    if st.background is not None else {}),
-                **({"poses": st.poses.state_dict(), "pose_opt": st.pose_opt.state_dict()} if st.poses is not None else {})},
+                **({"poses": st.poses.state_dict(), "pose_opt": st.pose_opt.state_dict()}
+                   if st.poses is not None else {}),
+                **({"head": st.head.state_dict()} if st.head is not None else {})},
                tmp)
     tmp.replace(path)
 
@@ -231,6 +240,8 @@ def _load_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, s
         st.background.load_state_dict(ck["background"]), st.bg_opt.load_state_dict(ck["bg_opt"])
     if st.poses is not None:
         st.poses.load_state_dict(ck["poses"]), st.pose_opt.load_state_dict(ck["pose_opt"])
+    if st.head is not None:
+        st.head.load_state_dict(ck["head"])
     st.step, st.train_seconds, st.rays, st.samples = ck["step"], ck["seconds"], ck["rays"], ck["samples"]
     return True
 
@@ -250,6 +261,10 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
     gen = torch.Generator().manual_seed(cfg.seed)
     st = new_state(posed, cfg, init_planes, hull, device)
     decoder.to(st.frame.centre.device)
+    if cfg.head == "on":
+        from .head import own_head
+        st.head = own_head(decoder)
+        st.opt.add_param_group({"params": st.head.head_parameters(), "lr": cfg.head_lr, "scale": cfg.head_lr / cfg.lr})
     if checkpoint is not None:
         _load_ckpt(checkpoint, st, cfg, gen, posed.name)
     log = []
@@ -266,14 +281,21 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
     if st.background is not None and cfg.object_steps > 0 and not lost_ground:
         from .object_carve import object_config, object_views
         poses = None if st.poses is None else st.poses.params.detach().cpu().numpy()
-        target = object_views(st.planes.planes.detach(), decoder, posed, poses)
+        now = decoder if st.head is None else st.head
+        target = object_views(st.planes.planes.detach(), now, posed, poses)
         if target is not None:
             sub = object_config(cfg)
-            alone = fit(target[0], decoder, sub, init_planes=st.planes.planes.detach(), hull=target[1],
+            alone = fit(target[0], now, sub, init_planes=st.planes.planes.detach(), hull=target[1],
                         device=st.frame.centre.device, progress=object_bar(sub.steps) if object_bar else None)
             st.planes.planes.data.copy_(alone.state.planes.planes.detach())
+            if st.head is not None:
+                st.head.load_state_dict(alone.state.head.state_dict())
     codes = quantize_planes(st.planes.planes.detach().cpu().numpy())
-    return FitResult(codes=codes, state=st, seconds=st.train_seconds, log=log, ending=chosen)
+    head = None
+    if st.head is not None:
+        from .head import head_text
+        head = head_text(st.head)
+    return FitResult(codes=codes, state=st, seconds=st.train_seconds, log=log, ending=chosen, head=head)
 
 
 def _run(st: FitState, decoder, cfg: FitConfig, gen, until: int, log: list | None, progress, checkpoint, name):
@@ -292,6 +314,12 @@ def _run(st: FitState, decoder, cfg: FitConfig, gen, until: int, log: list | Non
             _save_ckpt(checkpoint, st, cfg, gen, name)
 
 
+def _carried_head(decoder, head):
+    """The shared `decoder` with `head`'s last layer as its codes carry it (`head.with_head`)."""
+    from .head import head_text, with_head
+    return with_head(decoder, head_text(head))
+
+
 def _two_endings(st: FitState, decoder, cfg: FitConfig, gen, ending, log, progress, checkpoint, name):
     """`fit`'s last phase run plain and through `ending.channel` from the same state -> (the kept state,
     {"kept": "plain" | "channel", "e2e_expected": {ending: dB}, "seconds": the second ending's})."""
@@ -301,7 +329,8 @@ def _two_endings(st: FitState, decoder, cfg: FitConfig, gen, ending, log, progre
     t0 = twin.train_seconds
     twin.channel = ending.channel
     _run(twin, decoder, replace(cfg, channel_fraction=cfg.qat_fraction), twin_gen, cfg.steps, None, None, None, name)
-    scores = {k: ending.score(dequantize_planes(quantize_planes(s.planes.planes.detach().cpu().numpy())))
+    scores = {k: ending.score(dequantize_planes(quantize_planes(s.planes.planes.detach().cpu().numpy())),
+                              decoder if s.head is None else _carried_head(decoder, s.head))
               for k, s in (("plain", st), ("channel", twin))}
     kept = "channel" if scores["channel"] >= scores["plain"] + MARGIN_DB else "plain"
     info = {"kept": kept, "e2e_expected": {k: round(v, 3) for k, v in scores.items()},

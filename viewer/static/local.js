@@ -62,14 +62,15 @@ const S3DLocal = (() => {
     return x;
   }
 
-  // the metadata line (contract section 1) -> {version, codec, box, orbit, target, planes, strength}
+  // the metadata line (contract section 1) -> {version, codec, box, orbit, target, planes, strength, decoder,
+  // head}; head: whether the scene has a head of its own (h=), which this page leaves to the server
   function parseMeta(text) {
     const parts = text.split("|");
     if (parts.length < 2 || !/^S3D\d+$/.test(parts[0])) throw new Error("not a snapshot3d metadata line");
     const f = {};
     for (const p of parts.slice(2)) { const [k, v] = p.split("="); f[k] = v.split(",").map(Number); }
     return { version: Number(parts[0].slice(3)), codec: parts[1], box: f.b, orbit: f.o, target: f.t,
-             planes: f.p, strength: f.s ? f.s[0] : 1, decoder: `tri-dec-${f.d ? f.d[0] : 1}` };
+             planes: f.p, strength: f.s ? f.s[0] : 1, decoder: `tri-dec-${f.d ? f.d[0] : 1}`, head: "h" in f };
   }
 
   // (GRID, R) spread matrix U and its pseudo-inverse P = (U^T U)^-1 U^T (R, GRID), float64 row-major
@@ -241,7 +242,7 @@ const S3DLocal = (() => {
     const text = pngText(buffer, "snapshot3d"), size = pngSize(buffer);
     if (!text || !size || !fileScale(...size)) return null;
     const meta = parseMeta(text);
-    return meta.codec === FILE_CODEC && meta.version === 1 && meta.planes && meta.box ? { meta, text } : null;
+    return meta.codec === FILE_CODEC && meta.version === 1 && meta.planes && meta.box && !meta.head ? { meta, text } : null;
   }
 
   async function decode(file, meta, progress = () => {}) {
