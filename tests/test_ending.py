@@ -70,6 +70,24 @@ def test_channel_kept_past_the_margin(small):
     assert got.state.step == cfg.steps
 
 
+def test_with_its_own_head_the_channel_ending_is_kept_unless_expected_worse_by_the_margin(small):
+    """A head fitted to clean planes makes the views more sensitive to the print than the model sees: with one,
+    the channel ending stays unless the model expects it MARGIN_DB worse; the scorer reads the head as carried."""
+    from snapshot3d.train.field.head import last_layer
+    posed, dec, cfg, hull = small
+    d = ending_noise(16, 4, print_channel())
+    heads = []
+    for bonus, kept in ((-MARGIN_DB + 0.01, "channel"), (-MARGIN_DB - 0.01, "plain")):
+        score, seen = _scorer(bonus)
+
+        def spy(planes, decoder, score=score):
+            heads.append(last_layer(decoder))
+            return score(planes, decoder)
+        got = fit(posed, dec, replace(cfg, head="on"), hull=hull, ending=Ending(d, spy))
+        assert got.ending["kept"] == kept and got.head is not None
+    assert not torch.equal(heads[0], last_layer(dec))   # the scorer saw the scene's own head, not the shared one
+
+
 def test_no_ending_with_a_background_model_or_a_fixed_channel_phase(small):
     posed, dec, cfg, hull = small
     score, seen = _scorer(5.0)
