@@ -22,7 +22,7 @@ from .colour import apply_colour, fit_colour, linear_lut, marker_contrast
 from .detect import detect_markers, make_detector, refine_corners
 from .diagnose import SHARPNESS_MIN, exposure_problem, sharpness
 from .fit import Fit, fit_geometry
-from .headcode import join_head
+from .headcode import HEAD_CODES_FIELD, join_head
 from .imageio_safe import read_image_bgr
 from .pilot import pilot_psnr
 from .qr import check_meta, decode_payload, encode_payload, read_qr
@@ -36,7 +36,6 @@ MIN_SNAPSHOT_PX = 380     # at least one photo pixel per snapshot pixel: below, 
 MIN_CONTRAST = 0.3        # (paper - marker ink) / paper below this: washed out
 QR_MODULES = (21, 25, 29, 33, 37, 41)  # QR versions 1-6: the sheet's payloads fit these (its head codes: 5)
 HEAD_CODE_SCALE = 6      # px per layout unit the head codes are read at, from the photo
-HEAD_CODE_SPREAD = 40.0  # grey levels between the 10th and 90th percentile over which a head code's square holds one
 REPORT_KEYS = ("detected", "corners", "reprojection_px", "confidence", "pilot_psnr", "qr", "timings_ms")
 
 
@@ -204,8 +203,8 @@ def _halve(x: np.ndarray) -> np.ndarray:
 
 def _read_qr(hi: np.ndarray, img: np.ndarray, fit: Fit, chart: bool = False) -> dict | None:
     """Read the QR from the rectified sheet (OVERSAMPLE px per unit), and a scene's own head from the codes beside
-    it when the sheet has them (from the photo `img` through `fit`); UserError on a wrong codec id, or head codes
-    that cannot be read."""
+    it when the sheet has them (from the photo `img` through `fit`); UserError on a wrong codec id. Head codes that
+    cannot be read leave the head None and add "head_codes": "unread" to the metadata's dict."""
     text = _main_code(hi)
     if text is None:
         return None
@@ -213,17 +212,18 @@ def _read_qr(hi: np.ndarray, img: np.ndarray, fit: Fit, chart: bool = False) -> 
         meta = decode_payload(text)
     except ValueError as e:
         raise UserError(f"the QR code on the sheet is not a snapshot3d code ({e})") from None
-    if meta.head is None and not chart and _has_head_codes(hi):
+    unread = False
+    if meta.head is None and not chart and HEAD_CODES_FIELD in text.split(formats.QR_SEP):
         parts = [_head_code(img, fit, box) for box in formats.HEAD_CODE_BOXES]
         try:
             if None in parts:
                 raise ValueError("unreadable")
-            meta = replace(meta, head=join_head(parts))
-            decode_payload(encode_payload(meta))   # the head's own checks
-        except ValueError:
-            raise UserError("found the sheet but could not read the two small codes beside its QR code (they hold the "
-                            "scene's own decoder head); retake the photo closer and sharper") from None
-    return check_meta(meta, "the sheet's QR code", chart=chart).as_dict()
+            with_head = replace(meta, head=join_head(parts))
+            meta = decode_payload(encode_payload(with_head))   # the head's own checks
+        except ValueError:   # the views then use the shared decoder's head: off-colour, which decode says
+            unread = True
+    out = check_meta(meta, "the sheet's QR code", chart=chart).as_dict()
+    return {**out, "head_codes": "unread"} if unread else out
 
 
 def _stretch(gray: np.ndarray) -> np.ndarray:
@@ -249,17 +249,6 @@ def _head_code(img: np.ndarray, fit: Fit, box) -> str | None:
     x0, y0, x1, y1 = box
     crop = rectify_box(img, fit, (x0 - pad, y0 - pad, x1 + pad, y1 + pad), k)
     return _read_code(_stretch(crop), (x1 - x0) * k, pad * k)
-
-
-def _has_head_codes(hi: np.ndarray) -> bool:
-    """Whether the head codes' squares hold codes (a sheet without a head leaves them blank paper): their grey
-    spread against the paper's, in the raw rectified sheet."""
-    sx0, sy0 = formats.SHEET_BOX[:2]
-    o, spreads = OVERSAMPLE, []
-    for qx0, qy0, qx1, qy1 in formats.HEAD_CODE_BOXES:
-        crop = hi[(qy0 - sy0) * o:(qy1 - sy0) * o, (qx0 - sx0) * o:(qx1 - sx0) * o].astype(np.float32).mean(2)
-        spreads.append(float(np.percentile(crop, 90) - np.percentile(crop, 10)))
-    return min(spreads) > HEAD_CODE_SPREAD
 
 
 def _read_code(gray: np.ndarray, side: float, pad: int) -> str | None:

@@ -19,7 +19,7 @@ from snapshot3d.codecs.media import CODEC_MEDIUM
 from snapshot3d.errors import UserError
 
 from . import layout
-from .headcode import split_head
+from .headcode import HEAD_CODES_FIELD, split_head
 from .imageio_safe import read_image_bgr, write_atomic
 from .qr import SheetMeta, encode_payload, qr_matrix, scene_meta
 
@@ -66,6 +66,7 @@ def render_sheet(snapshot: np.ndarray, meta: SheetMeta, k: int) -> np.ndarray:
         sheet[r0:r1, c0:c1] = np.round(np.array(colour) * 255).astype(np.uint8)
     codes = [(formats.QR_BOX, encode_payload(replace(meta, head=None)))]
     if meta.head is not None:   # the scene's own head: two smaller codes beside the QR code (scanner.headcode)
+        codes = [(formats.QR_BOX, codes[0][1] + formats.QR_SEP + HEAD_CODES_FIELD)]
         codes += list(zip(formats.HEAD_CODE_BOXES, split_head(meta.head)))
     for (qx0, qy0, qx1, _), text in codes:
         side = (qx1 - qx0) * k

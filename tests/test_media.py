@@ -173,3 +173,52 @@ def test_every_codec_embed_writes_ships_its_quality_calibration():
         q = quality_estimate(codec, pilot_psnr=30.0, plane_rmse=0.1, views_psnr=27.0)
         assert q["restore_psnr_expected_db"] is not None and 10 < q["restore_psnr_expected_db"] < 60, codec
         assert q["calibration"]["held_out_rmse_db"] < 3.0, codec
+
+
+def test_a_print_of_a_scene_with_its_own_head_decodes_with_it_and_warns_without_it(tmp_path):
+    """A scene with its own head: sheet -> moderate photo -> decode (torch blocked) renders with the head read from
+    the two codes beside the QR code; with one of them inked over, decode still renders, with the shared head, and
+    says so in one warning line."""
+    from dataclasses import replace
+
+    from test_decode import run_blocked
+
+    from snapshot3d.cameras import orbit_cameras
+    from snapshot3d.head import encode_head
+    from snapshot3d.metrics import psnr
+    from snapshot3d.scene import save_scene
+    from snapshot3d.viewer.render import render_views
+    from snapshot3d.viewer.runtime import scene_models
+
+    scene = replace(load_scene_file(SCENE), head=encode_head(np.random.default_rng(0).normal(0, 0.05, (4, 33))))
+    save_scene(scene, tmp_path / "h.s3d")
+    assert run_cli("embed", str(tmp_path / "h.s3d"), "--host", "builtin:chelsea", "-o",
+                   str(tmp_path / "snap.png")).returncode == 0
+    assert run_cli("sheet", str(tmp_path / "snap.png"), "-o", str(tmp_path / "sheet.pdf")).returncode == 0
+    sheet = cv2.imread(str(tmp_path / "sheet.png"))
+    k = sheet.shape[1] // (formats.SHEET_BOX[2] - formats.SHEET_BOX[0])
+    x0, y0, x1, y1 = formats.HEAD_CODE_BOXES[0]
+    sx0, sy0 = formats.SHEET_BOX[:2]
+    inked = sheet.copy()
+    inked[(y0 + 20 - sy0) * k:(y1 - 20 - sy0) * k, (x0 + 10 - sx0) * k:(x1 - 10 - sx0) * k] = 0
+    cv2.imwrite(str(tmp_path / "inked.png"), inked)
+    c2w, intr = orbit_cameras(scene.orbit, 4, 96)
+    ref = render_views(scene_models(scene), scene.planes(), scene.box, c2w, intr, 96, 96)
+    got = {}
+    for name in ("sheet", "inked"):
+        assert run_cli("simulate", str(tmp_path / f"{name}.png"), "-o", str(tmp_path / f"{name}.jpg"), "--severity",
+                       "moderate", "--seed", "3").returncode == 0
+        proc = run_blocked("decode", str(tmp_path / f"{name}.jpg"), "-o", str(tmp_path / name), "--views", "4",
+                           "--size", "96")
+        assert proc.returncode == 0, proc.stderr
+        rep = json.loads((tmp_path / name / "report.json").read_text())
+        views = np.stack([cv2.cvtColor(cv2.imread(str(tmp_path / name / "views" / f"{i:03d}.png")), cv2.COLOR_BGR2RGB)
+                          for i in range(4)]) / 255.0
+        got[name] = (rep, proc.stdout, psnr(views, ref))
+    rep, out, measured = got["sheet"]
+    assert rep["own_head"] and not rep["head_codes_unread"] and "off-colour" not in out
+    assert measured >= MODERATE_MIN_DB
+    rep, out, measured_inked = got["inked"]
+    assert not rep["own_head"] and rep["head_codes_unread"]
+    assert sum("the scene's own decoder head) could not be read" in line for line in out.splitlines()) == 1
+    assert measured_inked < measured - 1.0   # the shared head is not the scene's

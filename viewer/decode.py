@@ -9,7 +9,7 @@ pilot signal, and the `restore_psnr` they predict) and the channel the print cod
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +58,8 @@ def _meta(qr: dict | None):
     if qr is None:
         raise UserError("found the sheet but could not read its QR code (it holds the scene box and plane size); "
                         "retake the photo closer and sharper")
-    return _checked(SheetMeta(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in qr.items()}))
+    names = {f.name for f in fields(SheetMeta)}   # not the scan's notes ("head_codes")
+    return _checked(SheetMeta(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in qr.items() if k in names}))
 
 
 def _checked(meta):
@@ -179,6 +180,7 @@ def _scene(path, cfg: RenderConfig):
         "quality_estimate": None,   # `estimate` below, after the views
         "channel": None,   # `channel` below, after the views
         "planes": list(meta.planes), "decoder": scene.decoder_version, "own_head": scene.head is not None,
+        "head_codes_unread": bool(res is not None and res.qr and res.qr.get("head_codes") == "unread"),
         "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
         "scan": None if res is None else {k: v for k, v in res.report().items()

@@ -39,7 +39,7 @@ class FitConfig:
                                "the second where the model expects it at least 0.3 dB better at held-out views "
                                "(train/field/ending.py; not with --background outer); plain: the plain ending alone")
     head: str = config_field("auto", "a head of the scene's own: the shared decoder's last layer refitted for this "
-                             "scene and carried in its metadata (132 bytes for tri-dec-1; docs/fitting.md); auto: on "
+                             "scene and carried in its metadata (136 bytes for tri-dec-1; docs/fitting.md); auto: on "
                              "with --medium print, where the planes are small and the QR code carries it")
     head_lr: float = config_field(3e-3, "with --head on: the head's learning rate (decayed as the planes')")
     fg_fraction: float = config_field(0.75, "share of each batch drawn from rays that see the object (when masks exist)")
