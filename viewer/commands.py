@@ -69,7 +69,8 @@ def decode_command(args) -> int:
         print(line)
     if r.get("head_codes_unread"):
         print("warning: the two small codes beside the sheet's QR code (the scene's own decoder head) could not be "
-              "read: the views use the shared decoder's head and will be off-colour; retake the photo closer and sharper")
+              "read: the views use the shared decoder's head and will be off-colour; retake the photo closer and "
+              "sharper")
     if (r.get("channel") or {}).get("advice"):
         print(f"channel: {r['channel']['advice']}")
     return 0

@@ -56,15 +56,22 @@ def scene_models(scene, threads: int | None = None) -> FieldModels:
 def own_head(decoder: str, text: str) -> np.ndarray:
     """A scene's head text (the h= field) for decoder version `decoder` -> its last layer (4, H + 1) float32.
     UserError (one line) when the text does not fit that decoder."""
+    try:
+        return head_weights(_shared_head(decoder), text)
+    except ValueError as e:
+        raise UserError(f"the scene's head does not fit decoder {decoder}: {e}") from None
+
+
+@lru_cache(maxsize=4)
+def _shared_head(decoder: str) -> np.ndarray:
+    """The shipped decoder `decoder`'s last layer [W | b] (4, H + 1) float32 (read once)."""
     path = asset(f"decoder-{decoder}.npz")
     if not path.is_file():
         raise UserError(f"decoder {decoder} is not installed ({path})")
     with np.load(path) as z:
-        shared = shared_head(dict(z))
-    try:
-        return head_weights(shared, text)
-    except ValueError as e:
-        raise UserError(f"the scene's head does not fit decoder {decoder}: {e}") from None
+        out = shared_head(dict(z))
+    out.flags.writeable = False
+    return out
 
 
 @lru_cache(maxsize=16)

@@ -254,7 +254,8 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
     for the object-alone step's fit, when it runs. With `checkpoint`, state is saved every
     `cfg.checkpoint_every` steps and a run resumes from it. `ending` (an `ending.Ending`; not with a
     background model): the last phase is run both plain and through the channel's noise, and the channel
-    ending is kept where `ending.score` expects it `ending.MARGIN_DB` better (`FitResult.ending` says which)."""
+    ending is kept where `ending.score` expects it `ending.MARGIN_DB` better (`FitResult.ending` says which; with
+    a head of the scene's own, unless it expects it that much worse)."""
     for p in decoder.parameters():
         p.requires_grad_(False)
     torch.manual_seed(cfg.seed)
