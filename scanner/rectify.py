@@ -49,15 +49,22 @@ def rectify_sheet(image_bgr: np.ndarray, fit: Fit) -> np.ndarray:
         T = S @ fit.H @ M  # output pixel -> ROI pixel
         return cv2.warpPerspective(roi, T, (out_w, out_h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                    borderMode=cv2.BORDER_REPLICATE)
+    mx, my = _coarse_map(lambda out: apply_h(S, distort(apply_h(fit.H, apply_h(M, out)), fit.camera)), out_w, out_h)
+    return cv2.remap(roi, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def _coarse_map(to_source, out_w: int, out_h: int) -> tuple[np.ndarray, np.ndarray]:
+    """cv2.remap's (map_x, map_y) float32 (out_h, out_w) for `to_source` (output pixels (..., 2) float64 ->
+    source pixels (..., 2)), evaluated every _MAP_STEP output pixels and interpolated between (the lens model
+    is smooth; evaluating it per pixel costs far more)."""
     gx, gy = np.meshgrid(np.arange(0, out_w + _MAP_STEP, _MAP_STEP, dtype=np.float64),
                          np.arange(0, out_h + _MAP_STEP, _MAP_STEP, dtype=np.float64))
-    lay = apply_h(M, np.stack([gx, gy], -1))
-    src = apply_h(S, distort(apply_h(fit.H, lay), fit.camera)).astype(np.float32)
+    src = to_source(np.stack([gx, gy], -1)).astype(np.float32)
     A = np.array([[1.0 / _MAP_STEP, 0, 0], [0, 1.0 / _MAP_STEP, 0]], np.float32)
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     mx = cv2.warpAffine(src[..., 0], A, (out_w, out_h), flags=flags, borderMode=cv2.BORDER_REPLICATE)
     my = cv2.warpAffine(src[..., 1], A, (out_w, out_h), flags=flags, borderMode=cv2.BORDER_REPLICATE)
-    return cv2.remap(roi, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return mx, my
 
 
 def rectify_box(image_bgr: np.ndarray, fit: Fit, box, scale: int) -> np.ndarray:
@@ -66,12 +73,7 @@ def rectify_box(image_bgr: np.ndarray, fit: Fit, box, scale: int) -> np.ndarray:
     unit than `scale`) -> ((y1 - y0) * scale, (x1 - x0) * scale) uint8 grey."""
     x0, y0, x1, y1 = box
     w, h = (x1 - x0) * scale, (y1 - y0) * scale
-    # the map through the lens model on a grid of every _MAP_STEP output pixels, interpolated between (smooth)
-    gx, gy = np.meshgrid(x0 + (np.arange(0, w + _MAP_STEP, _MAP_STEP) + 0.5) / scale,
-                         y0 + (np.arange(0, h + _MAP_STEP, _MAP_STEP) + 0.5) / scale)
-    src = fit.to_photo(np.stack([gx, gy], -1).reshape(-1, 2)).reshape(gx.shape + (2,)).astype(np.float32)
-    A = np.array([[1.0 / _MAP_STEP, 0, 0], [0, 1.0 / _MAP_STEP, 0]], np.float32)
-    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-    mx, my = (cv2.warpAffine(src[..., i], A, (w, h), flags=flags, borderMode=cv2.BORDER_REPLICATE) for i in (0, 1))
+    M = np.array([[1 / scale, 0, x0 + 0.5 / scale], [0, 1 / scale, y0 + 0.5 / scale], [0, 0, 1]])
+    mx, my = _coarse_map(lambda out: fit.to_photo(apply_h(M, out).reshape(-1, 2)).reshape(out.shape), w, h)
     out = cv2.remap(image_bgr, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
     return cv2.cvtColor(out, cv2.COLOR_BGR2GRAY)

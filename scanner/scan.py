@@ -16,6 +16,7 @@ import numpy as np
 
 from snapshot3d import formats
 from snapshot3d.errors import UserError
+from snapshot3d.head import parse_head
 
 from . import layout
 from .colour import apply_colour, fit_colour, linear_lut, marker_contrast
@@ -25,7 +26,7 @@ from .fit import Fit, fit_geometry
 from .headcode import HEAD_CODES_FIELD, join_head
 from .imageio_safe import read_image_bgr
 from .pilot import pilot_psnr
-from .qr import check_meta, decode_payload, encode_payload, read_qr
+from .qr import check_meta, decode_payload, read_qr
 from .rectify import OVERSAMPLE, photo_px_per_unit, rectify_box, rectify_sheet
 
 __all__ = ["ScanResult", "scan_image", "scan_file", "refuse_snapshot_file", "DETECT_SIDE", "MIN_SNAPSHOT_PX", "REPORT_KEYS"]
@@ -218,8 +219,9 @@ def _read_qr(hi: np.ndarray, img: np.ndarray, fit: Fit, chart: bool = False) -> 
         try:
             if None in parts:
                 raise ValueError("unreadable")
-            with_head = replace(meta, head=join_head(parts))
-            meta = decode_payload(encode_payload(with_head))   # the head's own checks
+            head = join_head(parts)
+            parse_head(head)   # the head's own checks
+            meta = replace(meta, head=head)
         except ValueError:   # the views then use the shared decoder's head: off-colour, which decode says
             unread = True
     out = check_meta(meta, "the sheet's QR code", chart=chart).as_dict()
