@@ -72,7 +72,13 @@ def heldout_hosts(count: int) -> list[str]:
 def capture(snap: np.ndarray, meta, severity: str, seed: int, dots: int | None = None) -> np.ndarray | None:
     """The rectified snapshot `scan` gives from a simulated photo of the snapshot's sheet (None: not found);
     `dots` sets the printer's dots per snapshot pixel (the print's size)."""
-    from snapshot3d.scanner.roundtrip import capture as scan_capture
+    got = capture_scan(snap, meta, severity, seed, dots)
+    return None if got is None else got.snapshot
+
+
+def capture_scan(snap: np.ndarray, meta, severity: str, seed: int, dots: int | None = None):
+    """`capture`'s scan whole (`scanner.scan.ScanResult`: the rectified snapshot and the QR code's dict), or None."""
+    from snapshot3d.scanner.roundtrip import capture_scan as scan_capture
 
     try:
         return scan_capture(snap, meta, severity, seed, print_dots=dots)
@@ -80,12 +86,19 @@ def capture(snap: np.ndarray, meta, severity: str, seed: int, dots: int | None =
         return None
 
 
+def head_read(scan, meta) -> int | None:
+    """1 when the head codes of a sheet with them (`meta.head`) were read from the photo, 0 when not (the views are
+    then scored with the shared head; also when the QR code itself was not read, which `decode` refuses and the
+    benches, knowing the metadata, read on), None when the sheet has none."""
+    return None if meta.head is None else int(bool(scan.qr and scan.qr.get("head")))
+
+
 class E2E:
     """e2e_psnr: decoded planes rendered at a scene's held-out ground-truth views (up to `views`)."""
 
     def __init__(self, scene, views: int = 5):
         from snapshot3d.loaders import load_scene
-        from snapshot3d.train.field.decoder import scene_decoder
+        from snapshot3d.train.field.decoder import load_decoder, scene_decoder
 
         src = scene.meta.get("source", "")
         kw = {"size": scene.meta.get("size", 200)} if src.startswith("builtin:") else \
@@ -93,10 +106,14 @@ class E2E:
         self.posed = load_scene(src, **kw)
         self.views = self.posed.test[np.linspace(0, len(self.posed.test) - 1, views).round().astype(int)]
         self.decoder = scene_decoder(scene)
+        self.shared = self.decoder if scene.head is None else load_decoder(scene.decoder_version)
 
-    def psnr(self, planes: np.ndarray) -> float:
+    def psnr(self, planes: np.ndarray, shared: bool = False) -> float:
+        """Held-out field_psnr of planes (3, C, R, R) with the scene's decoder, or the shared decoder without its
+        own head (`shared`: a photo whose head codes were not read decodes so)."""
         from snapshot3d.train.field.evaluate import evaluate_planes
-        return evaluate_planes(planes.astype(np.float32), self.decoder, self.posed, self.views)["field_psnr"]
+        dec = self.shared if shared else self.decoder
+        return evaluate_planes(planes.astype(np.float32), dec, self.posed, self.views)["field_psnr"]
 
 
 def _decode(method: str, rect: np.ndarray, scene, meta):
@@ -136,15 +153,20 @@ def _rows(methods, scene, sname, hname, host, severities, seeds, judge, e2e, str
                 "host_psnr": psnr(snap / 255, host8 / 255), "host_ssim": ssim(snap / 255, host8 / 255)}
         for sev in severities:
             for seed in capture_seeds(sev, seeds):
-                rect = capture(snap, meta, sev, seed, dots)
+                got = capture_scan(snap, meta, sev, seed, dots)
+                rect, head = (None, None) if got is None else (got.snapshot, head_read(got, meta))
                 for m in ([method, "print-front"] if method == "print" and "print-front" in methods else [method]):
                     row = dict(base, method=m, severity=sev, seed=seed, detected=int(rect is not None))
+                    if got is not None:
+                        row["qr_read"] = int(got.qr is not None)
+                    if head is not None:
+                        row["head_read"] = head
                     if rect is not None:
                         planes, expected = _decode(m, rect, scene, meta)
                         row.update(restore_psnr=judge.planes_psnr(planes), plane_rmse_expected=expected,
                                    plane_rmse=float(np.sqrt(np.mean((planes - scene.planes()) ** 2))))
                         if e2e is not None:
-                            row["e2e_psnr"] = e2e.psnr(planes)
+                            row["e2e_psnr"] = e2e.psnr(planes, shared=head == 0)
                     rows.append(row)
     return rows
 

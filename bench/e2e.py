@@ -37,6 +37,10 @@ def _summary(rows: list[dict], fields: dict, severities: list[str]) -> dict:
         out[name] = {**info, "e2e_psnr": {s: median([r for r in sel if r["severity"] == s], "e2e_psnr") for s in severities},
                      "restore_psnr": {s: median([r for r in sel if r["severity"] == s], "restore_psnr") for s in severities},
                      "n": {s: sum(r["severity"] == s for r in sel) for s in severities}}
+        for key in ("qr_read", "head_read"):   # photos whose QR code, and head codes, were read
+            got = {s: [r[key] for r in sel if r["severity"] == s and key in r] for s in severities}
+            if any(got.values()):
+                out[name][key] = {s: f"{sum(v)}/{len(v)}" for s, v in got.items()}
     return out
 
 
@@ -84,7 +88,7 @@ def _side_by_side(args, severities: list[str], path: Path) -> None:
     from snapshot3d.scene import load_scene_file
     from snapshot3d.train.field.evaluate import evaluate_planes
 
-    from .codec_print import E2E, _decode, _snapshot, capture
+    from .codec_print import E2E, _decode, _snapshot, capture_scan, head_read
 
     firsts = {}
     for p in (p for p in args.scenes.split(",") if p):
@@ -94,19 +98,29 @@ def _side_by_side(args, severities: list[str], path: Path) -> None:
     for fam, p in firsts.items():
         scene = load_scene_file(p)
         e2e = E2E(scene, 1)
-        one = lambda planes: evaluate_planes(planes.astype(np.float32), e2e.decoder, e2e.posed, e2e.views)["renders"][0]  # noqa: E731
-        row = [e2e.posed.images[e2e.views[0]], one(scene.planes())]
+        def one(planes, dec=e2e.decoder):
+            return evaluate_planes(planes.astype(np.float32), dec, e2e.posed, e2e.views)["renders"][0]
+
+        row, notes = [e2e.posed.images[e2e.views[0]], one(scene.planes())], ["", ""]
         snap, meta = _snapshot("print", host, scene), scene_meta(scene, "print-2")
         for s in severities:
-            rect = capture(snap, meta, s, 0)
-            row.append(one(_decode("print", rect, scene, meta)[0]) if rect is not None else np.ones_like(row[0]))
-        tiles.append((fam, row))
+            got = capture_scan(snap, meta, s, 0)
+            if got is None:   # the scanner refused the photo: a blank tile, said so
+                row.append(np.ones_like(row[0]))
+                notes.append("sheet not found")
+                continue
+            shared = head_read(got, meta) == 0
+            row.append(one(_decode("print", got.snapshot, scene, meta)[0], e2e.shared if shared else e2e.decoder))
+            notes.append("head codes unread:\nshared head" if shared else "")
+        tiles.append((fam, row, notes))
     plt = pyplot()
     cols = ["ground truth", "field alone"] + severities
     fig, axes = plt.subplots(len(tiles), len(cols), figsize=(2.4 * len(cols), 2.5 * len(tiles)), squeeze=False)
-    for r, (fam, row) in enumerate(tiles):
-        for c, img in enumerate(row):
+    for r, (fam, row, notes) in enumerate(tiles):
+        for c, (img, note) in enumerate(zip(row, notes)):
             axes[r, c].imshow(np.clip(img, 0, 1))
+            if note:
+                axes[r, c].text(0.5, 0.04, note, transform=axes[r, c].transAxes, ha="center", va="bottom", fontsize=7)
             axes[r, c].set_xticks([]), axes[r, c].set_yticks([])
             if r == 0:
                 axes[r, c].set_title(cols[c], fontsize=9)

@@ -163,10 +163,11 @@ def check_meta(meta: SheetMeta, where: str = "the snapshot's metadata", require_
     return meta
 
 
-def qr_matrix(text: str) -> np.ndarray:
-    """(N, N) uint8 QR modules for `text` (255 white, 0 black), quiet zone removed; error correction M."""
+def qr_matrix(text: str, level: str = "M") -> np.ndarray:
+    """(N, N) uint8 QR modules for `text` (255 white, 0 black), quiet zone removed; error correction `level`
+    (L, M, Q or H)."""
     params = cv2.QRCodeEncoder.Params()
-    params.correction_level = cv2.QRCodeEncoder_CORRECT_LEVEL_M
+    params.correction_level = getattr(cv2, f"QRCodeEncoder_CORRECT_LEVEL_{level}")
     q = cv2.QRCodeEncoder.create(params).encode(text)
     dark = np.argwhere(q == 0)
     (r0, c0), (r1, c1) = dark.min(0), dark.max(0)

@@ -19,7 +19,7 @@ from snapshot3d.codecs.media import CODEC_MEDIUM
 from snapshot3d.errors import UserError
 
 from . import layout
-from .headcode import HEAD_CODES_FIELD, split_head
+from .headcode import HEAD_CODE_LEVEL, HEAD_CODES_FIELD, split_head
 from .imageio_safe import read_image_bgr, write_atomic
 from .qr import SheetMeta, encode_payload, qr_matrix, scene_meta
 
@@ -64,13 +64,13 @@ def render_sheet(snapshot: np.ndarray, meta: SheetMeta, k: int) -> np.ndarray:
         r0, r1 = round((by0 - y0) * k), round((by1 - y0) * k)
         c0, c1 = round((bx0 - x0) * k), round((bx1 - x0) * k)
         sheet[r0:r1, c0:c1] = np.round(np.array(colour) * 255).astype(np.uint8)
-    codes = [(formats.QR_BOX, encode_payload(replace(meta, head=None)))]
+    codes = [(formats.QR_BOX, encode_payload(replace(meta, head=None)), "M")]
     if meta.head is not None:   # the scene's own head: two smaller codes beside the QR code (scanner.headcode)
-        codes = [(formats.QR_BOX, codes[0][1] + formats.QR_SEP + HEAD_CODES_FIELD)]
-        codes += list(zip(formats.HEAD_CODE_BOXES, split_head(meta.head)))
-    for (qx0, qy0, qx1, _), text in codes:
+        codes = [(formats.QR_BOX, codes[0][1] + formats.QR_SEP + HEAD_CODES_FIELD, "M")]
+        codes += [(box, text, HEAD_CODE_LEVEL) for box, text in zip(formats.HEAD_CODE_BOXES, split_head(meta.head))]
+    for (qx0, qy0, qx1, _), text, level in codes:
         side = (qx1 - qx0) * k
-        put(cv2.resize(qr_matrix(text), (side, side), interpolation=cv2.INTER_NEAREST), qx0, qy0)
+        put(cv2.resize(qr_matrix(text, level), (side, side), interpolation=cv2.INTER_NEAREST), qx0, qy0)
     return sheet
 
 

@@ -96,6 +96,10 @@ def test_head_codes_round_trip_and_refuse_foreign_parts(rng):
     parts = split_head(text)
     assert len(parts) == 2 and all(p.isupper() or not any(c.isalpha() for c in p) for p in parts)
     assert join_head(parts) == text and join_head(parts[::-1]) == text
+    from snapshot3d.scanner.headcode import HEAD_CODE_LEVEL
+    from snapshot3d.scanner.qr import qr_matrix
+    # tri-dec-1's head in two codes of 33 modules (level L): their modules 1.8 units wide in 60 (37 at level M)
+    assert [qr_matrix(p, HEAD_CODE_LEVEL).shape for p in parts] == [(33, 33)] * 2
     for bad in ([parts[0]], [parts[0], parts[0]], [parts[0], "S3D1|print-2"], [parts[0], parts[1][:-1] + "~"]):
         with pytest.raises(ValueError):
             join_head(bad)
