@@ -33,6 +33,7 @@ _SIDES_WALLS = {**PLAIN, "tighten_sides": True, "wall_weight": 0.3}
 MODES = {"white": ("transforms.json", "white", None, {}),
          "outer": ("transforms.json", "outer", "auto", {}),
          "outer-uncut": ("transforms.json", "outer", "auto", {"object_steps": 0.0}),
+         "outer-density": ("transforms.json", "outer", "auto", {"sparse_box": False}),
          "outer-nobox": ("transforms.json", "outer", "auto", {"object_box": 0.0}),
          "outer-plain": ("transforms.json", "outer", "auto", PLAIN),
          "outer-distortion": ("transforms.json", "outer", "auto", {**PLAIN, "distortion_weight": 0.001}),

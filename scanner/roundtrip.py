@@ -26,9 +26,9 @@ def capture_scan(snapshot: np.ndarray, meta, severity, seed: int, sheet_dots: in
                  print_dots: int | None = None):
     """snapshot (380, 380, 3) uint8 RGB and its metadata (`scanner.qr.SheetMeta`) -> what `scan` reads (its
     `ScanResult`: the rectified snapshot (380, 380, 3) uint8 RGB, the QR code's dict) from a simulated photo
-    (`severity`: a preset name or a `Preset`; `seed`) of its sheet, drawn at `sheet_dots` dots per snapshot pixel; `print_dots` replaces a physical
-    preset's printer dots per snapshot pixel (the print's size). Raises `UserError` when the scanner does not
-    find the sheet."""
+    (`severity`: a preset name or a `Preset`; `seed`) of its sheet, drawn at `sheet_dots` dots per snapshot pixel;
+    `print_dots` replaces a physical preset's printer dots per snapshot pixel (the print's size). Raises `UserError`
+    when the scanner does not find the sheet."""
     preset = get_preset(severity)
     if preset.physical and print_dots is not None:
         preset = replace(preset, print_dots_per_px=print_dots)

@@ -1,4 +1,5 @@
-"""The automatic box tightened from the learned density (fit --background outer with --box auto): a short fit
+"""The automatic box tightened (fit --background outer with --box auto): from the training photos' sparse points
+when they show a ground with an object on it (`snapshot3d/sparse_box.py`), else from the learned density: a short fit
 with the background model in the box the cameras' overlap gives (`snapshot3d/auto_box.py`), then, from the
 planes' density on a grid over that box, the ground, when most cameras look down (`box_from_density`): the box
 is cut at its top, so that the floor is left to the background model and the planes hold what stands on it. The
@@ -88,8 +89,29 @@ def _ground(alpha: np.ndarray, box: np.ndarray, looks_down: bool) -> tuple[np.nd
 
 
 def tighten_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tuple[np.ndarray, dict]:
-    """The box of `posed` tightened from a short fit with the background model (PREFIT_FRACTION of cfg.steps,
-    at least 10) -> (box (2, 3) float32 world, info for the report)."""
+    """The box of `posed` cut at the ground and round the object from the training photos' sparse points
+    (`snapshot3d.sparse_box`, with cfg.sparse_box and cameras that look down), else tightened from a short fit with
+    the background model (PREFIT_FRACTION of cfg.steps, at least 10) -> (box (2, 3) float32 world, info for the
+    report: ground_z, and the sparse points' counts or the pre-fit's steps)."""
+    t0 = time.perf_counter()
+    looks_down = bool(np.mean(-posed.c2w[posed.train, 2, 2] < 0) > 0.5)   # optical axes (-z) pointing down
+    info = {"first_box": np.round(posed.box, 4).tolist(), "sides_cut": bool(cfg.tighten_sides)}
+    if cfg.sparse_box and looks_down:
+        from snapshot3d.sparse_box import sparse_box
+        t = posed.train
+        box, found = sparse_box(posed.images[t], posed.c2w[t], posed.intrinsics[t], posed.box)
+        info.update(found, sparse_seconds=round(time.perf_counter() - t0, 1))
+        if box is not None:
+            if not cfg.tighten_sides:   # the floor alone
+                box = np.array(posed.box, np.float32)
+                box[0, 2] = max(box[0, 2], found["sparse_ground"])
+            return box, {**info, "ground_z": float(box[0, 2]), "box_from": "sparse points", "prefit_steps": 0,
+                         "prefit_seconds": info["sparse_seconds"]}
+    return _tightened_by_prefit(posed, decoder, cfg, looks_down, info, device)
+
+
+def _tightened_by_prefit(posed: PosedImages, decoder, cfg: FitConfig, looks_down: bool, info: dict,
+                         device=None) -> tuple[np.ndarray, dict]:
     from .fit import fit
     t0 = time.perf_counter()
     # the penalties at the box's walls and floor are left to the fit in the new box: here they thin the floor,
@@ -98,13 +120,10 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tup
                   channel_fraction=0.0, wall_weight=0.0, floor_weight=0.0,
                   object_steps=0.0)
     res = fit(posed, decoder, pre, device=device)
-    looks_down = bool(np.mean(-posed.c2w[posed.train, 2, 2] < 0) > 0.5)   # optical axes (-z) pointing down
     alpha = cell_alpha(res.state.planes.planes.detach(), decoder, posed.box, GRID)
     box, ground = box_from_density(alpha, np.asarray(posed.box, np.float64), looks_down, cfg.tighten_sides)
-    info = {"first_box": np.round(posed.box, 4).tolist(), "ground_z": None if ground is None else round(ground, 4),
-            "prefit_steps": pre.steps, "prefit_seconds": round(time.perf_counter() - t0, 1),
-            "sides_cut": bool(cfg.tighten_sides)}
-    return box, info
+    return box, {**info, "ground_z": None if ground is None else round(ground, 4), "box_from": "density",
+                 "prefit_steps": pre.steps, "prefit_seconds": round(time.perf_counter() - t0, 1)}
 
 
 def cells_box(cells: np.ndarray, box: np.ndarray, margin: int = OBJECT_MARGIN) -> np.ndarray:

@@ -153,11 +153,12 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
         box, more = object_box(replace(posed, box=box, info=info_ground), decoder, cfg, device)
         info.update(more)
         ground += f", then cut round the object's cells of a {more['object_box_steps']}-step fit"
-    read.update(box=box.tolist(), box_from=read["box_from"] + f"; tightened from {info['prefit_steps']} steps' "
-                f"density{ground}")
+    source = (f"{info['sparse_points']} sparse points of the photos ({info['object_points']} on the object)"
+              if info["box_from"] == "sparse points" else f"{info['prefit_steps']} steps' density")
+    read.update(box=box.tolist(), box_from=read["box_from"] + f"; tightened from {source}{ground}")
     if not quiet:
         lo, hi = (", ".join(f"{float(x):.3g}" for x in corner) for corner in box)
-        print(f"box ({lo})..({hi}) (tightened from {info['prefit_steps']} steps' density{ground}, "
+        print(f"box ({lo})..({hi}) (tightened from {source}{ground}, "
               f"{info['prefit_seconds'] + info.get('object_box_seconds', 0):.0f} s)")
     return replace(posed, box=box, info=info_ground), info
 

@@ -94,6 +94,10 @@ class FitConfig:
     tighten_sides: bool = config_field(True, "with --background outer and --box auto: the short pre-fit also cuts "
                                        "the box's sides and top to where its density lies, with a margin "
                                        "(train/field/box_tighten.py; fewer floaters, bench capture-background)")
+    sparse_box: bool = config_field(True, "with --background outer and --box auto: find the ground and the object "
+                                    "from the training photos' sparse 3D points (SIFT matched and triangulated at the "
+                                    "capture's poses, snapshot3d/sparse_box.py) before the short pre-fit, which then "
+                                    "runs only when they show no ground with an object on it")
     object_steps: float = config_field(0.5, "with --background outer: after the fit, this share of its steps more "
                                        "takes the planes to the object alone, against their own views with the "
                                        "ground, the shadow and the haze cut away (train/field/object_carve.py; "

@@ -1,0 +1,76 @@
+"""The automatic box from a capture's sparse points (snapshot3d/sparse_box.py): the ground and the object found in
+synthetic points, refused where the points show no ground, and found from a rendered capture's photos."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from snapshot3d.sparse_box import SparseBoxConfig, box_from_points, find_ground
+
+FIRST = np.array([[-1.6, -1.6, -1.6], [1.6, 1.6, 1.6]])
+OBJECT = np.array([[-0.4, -0.6, -1.0], [0.4, 0.6, 0.8]])
+
+
+def _points(rng, tilt_deg: float = 0.0, objects: int = 2000, strays: int = 40) -> np.ndarray:
+    """A floor at z = -1 (3000 points, 5 mm of noise), turned by tilt_deg about x, with an object's points on it
+    and stray ones anywhere in the first box."""
+    xy = rng.uniform(-1.5, 1.5, (3000, 2))
+    t = np.radians(tilt_deg)
+    floor = np.c_[xy[:, 0], xy[:, 1] * np.cos(t), -1.0 + xy[:, 1] * np.sin(t) + rng.normal(0, 0.005, 3000)]
+    obj = rng.uniform(OBJECT[0], OBJECT[1], (objects, 3))
+    return np.concatenate([floor, obj, rng.uniform(FIRST[0], FIRST[1], (strays, 3))])
+
+
+def test_the_ground_and_the_object_are_found_in_points_with_strays(rng):
+    pts = _points(rng)
+    (a, b, c), on = find_ground(pts, FIRST)
+    assert abs(a) < 0.01 and abs(b) < 0.01 and abs(c + 1.0) < 0.01 and on[:3000].mean() > 0.95
+    box, info = box_from_points(pts, FIRST)
+    cfg = SparseBoxConfig()
+    span = OBJECT[1] - OBJECT[0]
+    # the floor at the top of the ground points' band
+    assert abs(box[0, 2] - (-1.0 + cfg.tolerance * 1.6)) < 0.01 and abs(info["sparse_ground"] + 1.0) < 0.01
+    # the sides and the top round the object, widened by the margin and the pad, the 40 strays left out
+    grow = cfg.margin * span + cfg.pad * 1.6
+    np.testing.assert_allclose(box[0, :2], (OBJECT[0] - grow)[:2], atol=0.06)
+    np.testing.assert_allclose(box[1], OBJECT[1] + grow, atol=0.06)
+    assert info["object_points"] < 2000 + 40
+
+
+@pytest.mark.parametrize("case", ["steep", "nothing on it", "seen under it", "too few"])
+def test_points_that_show_no_ground_with_an_object_give_no_box(rng, case):
+    pts = {"steep": lambda: _points(rng, tilt_deg=35.0),
+           "nothing on it": lambda: _points(rng, objects=0, strays=0),
+           "seen under it": lambda: np.concatenate([_points(rng), rng.uniform([-1.5, -1.5, -1.5], [1.5, 1.5, -1.1],
+                                                                                 (1500, 3))]),
+           "too few": lambda: _points(rng)[::200]}[case]()
+    box, info = box_from_points(pts, FIRST)
+    assert box is None and info["sparse_points"] == len(pts)
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    from snapshot3d.make_capture import make_capture
+    from snapshot3d.make_capture_config import SynthCaptureConfig
+    return make_capture("builtin:spot", tmp_path_factory.mktemp("sparse") / "cap",
+                        SynthCaptureConfig(size=128, views=24))
+
+
+def test_a_rendered_capture_gives_its_ground_and_a_box_round_the_object_without_a_prefit(capture):
+    """Spot on its textured ground in a room, 24 photos of 128x96, no masks: the box holds the object, its floor is
+    the ground (the top of its points' band) within 3% of the object's height, and the fit's box step uses it
+    without the short pre-fit."""
+    from snapshot3d.capture import CaptureOptions, with_overlap_box
+    from snapshot3d.loaders import load_scene
+    from snapshot3d.train.field.box_tighten import tighten_box
+    from snapshot3d.train.field.config import FitConfig
+
+    posed = with_overlap_box(load_scene(str(capture / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0))))
+    true = np.array(json.loads((capture / "gt/truth.json").read_text())["box"])
+    box, info = tighten_box(posed, None, FitConfig(background="outer"))   # no decoder: no fit may run
+    assert info["box_from"] == "sparse points" and info["prefit_steps"] == 0 and info["sparse_points"] > 1000
+    assert abs(info["ground_z"] - true[0, 2]) < 0.03 * (true[1, 2] - true[0, 2])
+    assert np.all(box[0, :2] <= true[0, :2]) and np.all(box[1] >= true[1])
+    assert np.prod(box[1] - box[0]) < 0.5 * np.prod(posed.box[1] - posed.box[0])
