@@ -74,3 +74,6 @@ def test_a_rendered_capture_gives_its_ground_and_a_box_round_the_object_without_
     assert abs(info["ground_z"] - true[0, 2]) < 0.03 * (true[1, 2] - true[0, 2])
     assert np.all(box[0, :2] <= true[0, :2]) and np.all(box[1] >= true[1])
     assert np.prod(box[1] - box[0]) < 0.5 * np.prod(posed.box[1] - posed.box[0])
+    floor_only, _ = tighten_box(posed, None, FitConfig(background="outer", tighten_sides=False))
+    assert floor_only[0, 2] == box[0, 2] and np.array_equal(floor_only[:, :2], posed.box[:, :2])
+    assert floor_only[1, 2] == posed.box[1, 2]

@@ -103,10 +103,10 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tup
         info.update(found, sparse_seconds=round(time.perf_counter() - t0, 1))
         if box is not None:
             if not cfg.tighten_sides:   # the floor alone
-                box = np.array(posed.box, np.float32)
-                box[0, 2] = max(box[0, 2], found["sparse_ground"])
+                floor, box = box[0, 2], np.array(posed.box, np.float32)
+                box[0, 2] = floor
             return box, {**info, "ground_z": float(box[0, 2]), "box_from": "sparse points", "prefit_steps": 0,
-                         "prefit_seconds": info["sparse_seconds"]}
+                         "prefit_seconds": 0.0}
     return _tightened_by_prefit(posed, decoder, cfg, looks_down, info, device)
 
 

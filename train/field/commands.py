@@ -159,7 +159,7 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
     if not quiet:
         lo, hi = (", ".join(f"{float(x):.3g}" for x in corner) for corner in box)
         print(f"box ({lo})..({hi}) (tightened from {source}{ground}, "
-              f"{info['prefit_seconds'] + info.get('object_box_seconds', 0):.0f} s)")
+              f"{info.get('sparse_seconds', 0) + info['prefit_seconds'] + info.get('object_box_seconds', 0):.0f} s)")
     return replace(posed, box=box, info=info_ground), info
 
 
