@@ -61,3 +61,28 @@ def test_marching_cubes_recovers_a_sphere():
 def test_empty_field_has_no_mesh():
     with pytest.raises(UserError, match="no surface"):
         density_to_mesh(np.zeros((8, 8, 8)), 1.0, np.array([[0, 0, 0], [1, 1, 1.0]]), lambda p: p)
+
+
+def test_the_print_ladder_fits_its_chosen_rung_again_from_scratch_and_keeps_the_better():
+    """A print ladder's chosen rung, fine-tuned from the largest rung, is fitted again from scratch; the fit kept is
+    the one the print channel's model expects better, and the rung says so. Without a medium there is no refit."""
+    from snapshot3d.builtin import builtin_scene
+    from snapshot3d.train.field.budget import fit_ladder
+    from snapshot3d.train.field.config import FitConfig
+    from snapshot3d.train.field.decoder import load_decoder
+
+    posed = builtin_scene("procedural", n_train=12, n_test=3, size=32, seed=1)
+    cfg = FitConfig(steps=30, batch_rays=512, occ_warmup=10, ending="plain")
+    lines = []
+    chosen, rungs = fit_ladder(posed, load_decoder(), cfg, ladder=[(24, 4), (16, 4)], tolerance_db=99.0,
+                               log=lines.append, medium="print")
+    rung = rungs[chosen]
+    assert chosen == 1 and "refit" not in rungs[0] and sum("R=16 C=4 again from scratch" in s for s in lines) == 1
+    refit = rung["refit"]
+    assert rung["fit_seconds"] >= refit["fit_seconds"] > 0
+    if refit["kept"]:
+        assert rung["e2e_expected"] == refit["e2e_expected"] and rung["field_psnr"] == refit["field_psnr"]
+    else:
+        assert rung["e2e_expected"] > refit["e2e_expected"]
+    chosen, rungs = fit_ladder(posed, load_decoder(), cfg, ladder=[(24, 4), (16, 4)], tolerance_db=99.0, log=len)
+    assert chosen == 1 and not any("refit" in r for r in rungs)

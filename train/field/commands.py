@@ -104,8 +104,9 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         ev = {k: rungs[chosen][k] for k in ("field_psnr", "field_ssim")}
         steps = cfg.steps
         ev["renders"] = None
-        report["ladder"] = [{k: r[k] for k in ("plane_res", "plane_channels", "scene_kb", "field_psnr", "codec_psnr",
-                                               "codec_psnr_curve", "e2e_expected", "ending", "fit_seconds") if k in r} for r in rungs]
+        keys = ("plane_res", "plane_channels", "scene_kb", "field_psnr", "codec_psnr", "codec_psnr_curve",
+                "e2e_expected", "ending", "refit", "fit_seconds")
+        report["ladder"] = [{k: r[k] for k in keys if k in r} for r in rungs]
         report["medium"] = medium
     elif budget == "fixed":
         res = fit(posed, decoder, cfg, checkpoint=checkpoint, progress=bars("fit", cfg.steps) if bars else None,
