@@ -48,7 +48,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-ground-low": ("transforms.json", "outer", "auto", {"ground_texture": 128, "ground_depth": 0.05}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
-         "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"})}
+         "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),
+         "outer-density-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "sparse_box": False})}
 # `bench fit --captures` (issue 40 item 4): this bench with these settings
 CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size": 128, "views": 48, "steps": 150,
                     "occ_warmup": 32, "plane_res": 64, "plane_channels": 8, "seed": 0}

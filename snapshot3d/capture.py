@@ -13,8 +13,9 @@ from .carve import carve, tight_box
 from .errors import UserError
 from .posed import PosedImages
 
-__all__ = ["CaptureOptions", "parse_box", "parse_up", "up_rotation", "split", "shrink", "describe", "assemble",
-           "builtin_options", "fit_box", "box_from_cameras", "WHITE_BORDER", "choose_background", "with_overlap_box"]
+__all__ = ["CaptureOptions", "parse_box", "parse_up", "cameras_up", "up_rotation", "split", "shrink", "describe",
+           "assemble", "builtin_options", "fit_box", "box_from_cameras", "WHITE_BORDER", "choose_background",
+           "with_overlap_box"]
 
 DEFAULT_BOX = np.array([[-1.5, -1.5, -1.5], [1.5, 1.5, 1.5]], np.float32)  # NeRF-Synthetic convention
 # `fit --background auto`: a capture without masks is "on white" when this share of its frames' border pixels is
@@ -33,7 +34,7 @@ class CaptureOptions:
     """(x0, y0, z0, x1, y1, z1) world box, in the world after the up rotation; None: from masks or cameras;
     "auto": without masks, the cube that most views hold in their frame (`auto_box.overlap_box`), else as None"""
     up: object = None
-    """"auto" (the mean of the cameras' up vectors), an (x, y, z) vector, or None: the layout's default
+    """"auto" (square to the cameras' level x axes, `cameras_up`), an (x, y, z) vector, or None: the layout's default
     (Blender, builtin: as given; nerfstudio, COLMAP: auto). The world is rotated so that it becomes +z."""
     max_size: int | None = None
     """longest image side in pixels after --downscale (images are shrunk to it); None: no limit"""
@@ -74,23 +75,44 @@ def check_holdout(n, field: str = "--holdout") -> int:
     return n
 
 
-def up_rotation(c2w: np.ndarray, up) -> tuple[np.ndarray, np.ndarray]:
-    """(R (3, 3), up (3,)): the smallest rotation taking the world axis `up` ("auto": the mean of the cameras'
-    up vectors, c2w[:, :3, 1] in OpenGL axes; or an (x, y, z) vector) to +z."""
-    if isinstance(up, str):
-        m = c2w[:, :3, 1].astype(np.float64).mean(0)
-        if np.linalg.norm(m) < 1e-3:
-            raise UserError("--up auto: the cameras' up vectors cancel out (no common up); give --up x,y,z")
+UPRIGHT_SPREAD = 0.15   # rms spread of the cameras' x axes off their main direction that fixes up by the x axes alone
+
+
+def cameras_up(c2w: np.ndarray) -> tuple[np.ndarray, str]:
+    """The world's up from cameras held upright (c2w (N, 4, 4) OpenGL) -> (unit (3,), how). Upright cameras keep
+    their x axes (c2w[:, :3, 0]) level, so up is the direction across them (the least singular vector), signed by
+    the mean of their up vectors (c2w[:, :3, 1]), as COLMAP's upright alignment and nerfstudio's "vertical" do.
+    The mean up alone leans toward the object when the views look down over less than a full turn, or rise as they
+    go round. When the x axes hardly spread (rms under UPRIGHT_SPREAD off their main direction: a capture from one
+    side), they fix up about one axis only: the mean up, made square to their main direction."""
+    x = c2w[:, :3, 0].astype(np.float64)
+    x = x / np.linalg.norm(x, axis=1, keepdims=True)
+    mean_up = c2w[:, :3, 1].astype(np.float64).mean(0)
+    if np.linalg.norm(mean_up) < 1e-3:
+        raise UserError("--up auto: the cameras' up vectors cancel out (no common up); give --up x,y,z")
+    _, s, vt = np.linalg.svd(x, full_matrices=False)
+    if len(x) >= 3 and s[1] / np.sqrt(len(x)) >= UPRIGHT_SPREAD:
+        u, how = vt[2], "auto: square to the cameras' level x axes"
     else:
-        m = np.asarray(up, np.float64)
+        u, how = mean_up - vt[0] * float(vt[0] @ mean_up), "auto: the cameras' mean up, square to their x axes"
+    if np.linalg.norm(u) < 1e-3:
+        raise UserError("--up auto: the cameras' up vectors lie along their x axes (no common up); give --up x,y,z")
+    u = u / np.linalg.norm(u)
+    return (u if u @ mean_up > 0 else -u), how
+
+
+def up_rotation(c2w: np.ndarray, up) -> tuple[np.ndarray, np.ndarray, str]:
+    """(R (3, 3), up (3,), how): the smallest rotation taking the world axis `up` ("auto": `cameras_up`; or an
+    (x, y, z) vector) to +z, and where that axis came from."""
+    m, how = cameras_up(c2w) if isinstance(up, str) else (np.asarray(up, np.float64), "--up")
     u = m / np.linalg.norm(m)
     z = np.array([0.0, 0.0, 1.0])
     v, c = np.cross(u, z), float(u @ z)
     s = np.linalg.norm(v)
     if s < 1e-12:
-        return (np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])), u
+        return (np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])), u, how
     vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + vx + vx @ vx * ((1 - c) / s**2), u
+    return np.eye(3) + vx + vx @ vx * ((1 - c) / s**2), u, how
 
 
 def split(n: int, holdout: int) -> tuple[np.ndarray, np.ndarray]:
@@ -123,7 +145,8 @@ def shrink(rgb: np.ndarray, alpha, downscale: int, max_size: int | None, where: 
 
 
 def _vec(v) -> str:
-    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+    """Three significant digits, to 1e-4 (a box's or an axis's rounding noise reads 0)."""
+    return "(" + ", ".join(f"{round(float(x), 4) + 0.0:.3g}" for x in v) + ")"
 
 
 def describe(info: dict) -> str:
@@ -173,9 +196,9 @@ def assemble(frames: list, opts: CaptureOptions, *, where: str, name: str, layou
     up = opts.up if opts.up is not None else default_up
     up_vec, up_from = (0.0, 0.0, 1.0), "as given"
     if up is not None:
-        rot, up_vec = up_rotation(c2w, up)
+        rot, up_vec, up_how = up_rotation(c2w, up)
         c2w[:, :3, :] = np.einsum("ij,njk->nik", rot, c2w[:, :3, :])
-        up_from = ("auto: the cameras' mean up" if isinstance(up, str) else "--up") + ", turned to +z"
+        up_from = up_how + ", turned to +z"
     c2w = c2w.astype(np.float32)
     n = len(frames)
     holdout = opts.holdout if opts.holdout is not None else default_split if isinstance(default_split, int) else None
@@ -245,11 +268,11 @@ def builtin_options(posed: PosedImages, opts: CaptureOptions) -> PosedImages:
     c2w, box = posed.c2w.astype(np.float64), posed.box
     up_vec, up_from = (0.0, 0.0, 1.0), "as given"
     if opts.up is not None:
-        rot, up_vec = up_rotation(c2w, opts.up)
+        rot, up_vec, up_how = up_rotation(c2w, opts.up)
         c2w[:, :3, :] = np.einsum("ij,njk->nik", rot, c2w[:, :3, :])
         corners = np.stack(np.meshgrid(*box.T, indexing="ij"), -1).reshape(-1, 3) @ rot.T
         box = np.stack([corners.min(0), corners.max(0)])
-        up_from = ("auto: the cameras' mean up" if isinstance(opts.up, str) else "--up") + ", turned to +z"
+        up_from = up_how + ", turned to +z"
     train, test, how = posed.train, posed.test, "the builtin test views"
     if opts.holdout is not None:
         train, test = split(len(c2w), opts.holdout)

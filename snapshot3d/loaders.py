@@ -293,7 +293,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 def load_colmap(model_dir: Path, downscale: int = 1, capture: CaptureOptions | None = None) -> PosedImages:
     """COLMAP sparse text model in `model_dir` (`snapshot3d.colmap`) with its images in `images/` beside it
     (or two folders up, for `sparse/0`). Lenses are undone on load; every 8th image (sorted by name) is held
-    out and the world turned so that the cameras' mean up is +z, unless `capture` says otherwise."""
+    out and the world turned so that up (`capture.cameras_up`) is +z, unless `capture` says otherwise."""
     from . import colmap
 
     opts = capture or CaptureOptions()

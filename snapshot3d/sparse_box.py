@@ -3,17 +3,17 @@ background model): what COLMAP's sparse model holds, found here with the capture
 
 SIFT features of each training frame are matched (ratio test) with those of its nearest cameras, triangulated, and
 kept where they reproject within `reproj_px` in both frames with at least `min_parallax_deg` between the rays.
-Under the cameras' look-at point, the plane within `max_tilt_deg` of horizontal that holds the most points is the
-ground (RANSAC, a fixed seed); the points above it inside the first box, less the stray ones (`knn`), are the
+Under the cameras' look-at point, the plane that holds the most points in a band of `tolerance` is the ground
+(RANSAC, a fixed seed) if it lies within `max_tilt_deg` of horizontal; where poses a little off scatter the points,
+the band widens (`spread`). The points above it inside the first box, less the stray ones (`knn`), are the
 object's. The box is cut round them: their `quantile` and 1 - `quantile` on each axis, widened by `margin` of the
-span and `pad` of the first box (the points miss the object's untextured parts), the floor at the top of the
-ground's points' band (`tolerance` over the plane: a fit's ground is not thinner). None when
-the points do not show a ground with an object on it; the fit then finds them from a short fit's density
-(`train/field/box_tighten.py`).
+span and `pad` of the first box (the points miss the object's untextured parts), the floor `floor_lift` over the
+plane (a fit's ground is not thinner). None when the points do not show a ground with an object on it; the fit
+then finds them from a short fit's density (`train/field/box_tighten.py`).
 
-On the 128x96 composites of spot (seeds 0-2), duck (1, 2), teapot, bunny and suzanne (0), 4,000 to 8,000 points a
-capture in about a second: the ground within 0.012 of the truth on all eight, and each box holds the object's true
-box (suzanne's within 0.02), where the density rule put spot's seed-1 ground at -1.52 (true -0.98; docs/capture.md).
+On the 128x96 composites of spot and duck (seeds 0-2), teapot, bunny and suzanne (0), 4,000 to 8,000 points a
+capture in about a second: the ground within 0.004 of the truth on all nine, and each box holds the object's true
+box, where the density rule put spot's seed-1 ground at -1.52 (true -0.98; docs/capture.md).
 """
 from __future__ import annotations
 
@@ -46,14 +46,17 @@ class SparseBoxConfig:
     quantile: float = 0.01         # the object's extent: these quantiles of its points ...
     margin: float = 0.25           # ... widened by this share of their span (the points miss untextured parts) ...
     pad: float = 0.1               # ... and this share of the first box's half-size
+    floor_lift: float = 0.026      # the floor: this share of the half-size over the ground (0.042 on spot; measured)
     iterations: int = 400          # RANSAC draws
+    spread: tuple = (1, 2, 3)      # the band is widened by these factors in turn until a plane passes: points from
+    #                                poses a little off scatter about the ground (0.5 deg: 17% within 1x of it)
+    scatter_quantile: float = 0.99  # in a widened band, the object's points lie higher over the ground than this
+    #                                quantile of the depths under it
 
 
 def _projection(c2w: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:
-    """(4, 4) OpenGL camera-to-world and (fx, fy, cx, cy) -> (3, 4) OpenCV projection matrix K [R | t], for SIFT's
-    keypoints as they come. The intrinsics put pixel centres at +0.5 (`snapshot3d.cameras`) and OpenCV at integers,
-    yet shifting cx, cy by half a pixel moved the ground found on the composites from 0.008-0.011 above the truth
-    to 0.010-0.015 below it (docs/capture.md): not shifted."""
+    """(4, 4) OpenGL camera-to-world and (fx, fy, cx, cy) -> (3, 4) OpenCV projection matrix K [R | t], in the
+    intrinsics' own pixel convention (centres at +0.5, `snapshot3d.cameras`)."""
     fx, fy, cx, cy = (float(v) for v in intrinsics)
     k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]])
     w2c = OPENCV_TO_OPENGL @ np.linalg.inv(np.asarray(c2w, np.float64))   # the flip is its own inverse
@@ -79,7 +82,9 @@ def sparse_points(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray,
                   cfg: SparseBoxConfig = SparseBoxConfig()) -> np.ndarray:
     """images (N, H, W, 3) float32 RGB in [0, 1], c2w (N, 4, 4) OpenGL, intrinsics (N, 4) (fx, fy, cx, cy) of
     undistorted frames -> (M, 3) float64 world points triangulated from matched SIFT features (M may be 0)."""
-    sift = cv2.SIFT_create(nfeatures=cfg.features, contrastThreshold=0.01)
+    # precise upscale: SIFT's first octave maps pixel x to 2x; OpenCV's default upscale shifts keypoints by about a
+    # quarter pixel (opencv/opencv#23123), which put the ground found 0.01 off on the composites (docs/capture.md)
+    sift = cv2.SIFT_create(nfeatures=cfg.features, contrastThreshold=0.01, enable_precise_upscale=True)
     feats = [sift.detectAndCompute(cv2.cvtColor(np.clip(im * 255 + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_RGB2GRAY),
                                    None) for im in images]
     proj = [_projection(c, k) for c, k in zip(c2w, intrinsics)]
@@ -92,8 +97,8 @@ def sparse_points(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray,
                 if len(m) == 2 and m[0].distance < cfg.ratio * m[1].distance]
         if len(good) < 8:
             continue
-        xi = np.float64([ki[g.queryIdx].pt for g in good]).T
-        xj = np.float64([kj[g.trainIdx].pt for g in good]).T
+        xi = np.float64([ki[g.queryIdx].pt for g in good]).T + 0.5   # OpenCV's pixel centres (integers) to +0.5
+        xj = np.float64([kj[g.trainIdx].pt for g in good]).T + 0.5
         h = cv2.triangulatePoints(proj[i], proj[j], xi, xj)
         pts = (h[:3] / np.where(np.abs(h[3]) > 1e-12, h[3], 1e-12)).T
         ok = np.ones(len(pts), bool)
@@ -108,21 +113,30 @@ def sparse_points(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray,
 
 
 def find_ground(points: np.ndarray, box: np.ndarray, cfg: SparseBoxConfig = SparseBoxConfig()):
-    """points (M, 3) world; box (2, 3) the first box (its centre the cameras' look-at point) -> (a, b, c) of the
-    ground plane z = a x + b y + c and its points' mask (M,) bool, or None when no plane under the look-at point
-    holds min_ground_share of the points there with at most max_below_share of them below it."""
-    box = np.asarray(box, np.float64)
+    """points (M, 3) world; box (2, 3) the first box (its centre the cameras' look-at point) -> ((a, b, c) of the
+    ground plane z = a x + b y + c, its points' mask (M,) bool, the band's factor of `spread`), or None when no
+    plane under the look-at point holds min_ground_share of the points there with at most max_below_share of them
+    below it, at any band of `spread`."""
+    for factor in cfg.spread:
+        found = _ground_plane(points, np.asarray(box, np.float64), cfg, factor)
+        if found is not None:
+            return (*found, factor)
+    return None
+
+
+def _ground_plane(points: np.ndarray, box: np.ndarray, cfg: SparseBoxConfig, factor: float):
+    """`find_ground` with its band `factor` times `tolerance` -> (plane, mask) or None."""
     centre, half = box.mean(0), float((box[1] - box[0]).max()) / 2
     under = np.all((points[:, :2] >= box[0, :2]) & (points[:, :2] <= box[1, :2]), axis=1) & (points[:, 2] < centre[2])
     low = points[under]
     if len(low) < cfg.min_points:
         return None
-    tol, rng = cfg.tolerance * half, np.random.default_rng(0)
+    tol, rng = factor * cfg.tolerance * half, np.random.default_rng(0)
     best, best_n = None, 0
-    for _ in range(cfg.iterations):
+    for _ in range(cfg.iterations):   # any plane up to 60 degrees: a steeper floor must win, then be refused
         p = low[rng.choice(len(low), 3, replace=False)]
         n = np.cross(p[1] - p[0], p[2] - p[0])
-        if np.linalg.norm(n) < 1e-12 or abs(n[2]) / np.linalg.norm(n) < np.cos(np.radians(cfg.max_tilt_deg)):
+        if np.linalg.norm(n) < 1e-12 or abs(n[2]) / np.linalg.norm(n) < 0.5:
             continue
         n = n / np.linalg.norm(n)
         count = int(np.sum(np.abs((low - p[0]) @ n) < tol))
@@ -136,7 +150,8 @@ def find_ground(points: np.ndarray, box: np.ndarray, cfg: SparseBoxConfig = Spar
         plane = np.linalg.lstsq(np.c_[low[near, :2], np.ones(near.sum())], low[near, 2], rcond=None)[0]
         near = np.abs(low[:, 2] - low[:, :2] @ plane[:2] - plane[2]) < tol
     resid = low[:, 2] - low[:, :2] @ plane[:2] - plane[2]
-    if np.mean(np.abs(resid) < tol) < cfg.min_ground_share or np.mean(resid < -3 * tol) > cfg.max_below_share:
+    if np.mean(np.abs(resid) < tol) < cfg.min_ground_share or np.mean(resid < -3 * tol) > cfg.max_below_share or \
+            np.hypot(plane[0], plane[1]) > np.tan(np.radians(cfg.max_tilt_deg)):
         return None
     mask = np.zeros(len(points), bool)
     mask[np.nonzero(under)[0][np.abs(resid) < tol]] = True
@@ -170,21 +185,27 @@ def box_from_points(points: np.ndarray, box: np.ndarray,
     ground = find_ground(points, box, cfg) if len(points) else None
     if ground is None:
         return None, {**info, "sparse_ground": None}
-    (a, b, c), on_ground = ground
+    (a, b, c), on_ground, factor = ground
     centre, half = box.mean(0), float((box[1] - box[0]).max()) / 2
     ground_z = float(a * centre[0] + b * centre[1] + c)
     height = points[:, 2] - points[:, :2] @ np.array([a, b]) - c
     inside = np.all((points >= box[0]) & (points <= box[1]), axis=1)
-    obj = _clustered(points[inside & (height > 3 * cfg.tolerance * half)], cfg.knn_radius * half, cfg)
+    above = 3 * factor * cfg.tolerance * half
+    if factor != cfg.spread[0] and np.any(inside & (height < 0)):
+        # scattered points: those under an opaque ground are its scatter, and as much lies over it
+        above = max(above, float(np.quantile(-height[inside & (height < 0)], cfg.scatter_quantile)))
+    obj = _clustered(points[inside & (height > above)], cfg.knn_radius * half, cfg)
     info.update(sparse_ground=round(ground_z, 4), ground_points=int(on_ground.sum()), object_points=int(len(obj)),
-                ground_tilt_deg=round(float(np.degrees(np.arctan(np.hypot(a, b)))), 2))
+                ground_tilt_deg=round(float(np.degrees(np.arctan(np.hypot(a, b)))), 2), ground_band=factor)
     if len(obj) < cfg.min_points:
         return None, info
     lo, hi = np.quantile(obj, cfg.quantile, axis=0), np.quantile(obj, 1 - cfg.quantile, axis=0)
     span = hi - lo
     grow = cfg.margin * span + cfg.pad * half
     out = np.stack([np.maximum(box[0], lo - grow), np.minimum(box[1], hi + grow)])
-    out[0, 2] = max(box[0, 2], ground_z + cfg.tolerance * half)   # the top of the ground's points' band
+    # where the band had to widen, the plane itself: the plane of many scattered points lies near the ground all
+    # the same, and a floor above it would cut the object's base
+    out[0, 2] = max(box[0, 2], ground_z + (cfg.floor_lift * half if factor == cfg.spread[0] else 0.0))
     if not np.all(out[1] > out[0]):
         return None, info
     return out.astype(np.float32), info

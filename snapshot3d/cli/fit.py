@@ -40,7 +40,7 @@ def add_commands(sub) -> None:
                         "frames are scored (default: Blender's test split, builtin's test views, else every 8th)")
     f.add_argument("--box", help="world box x0,y0,z0,x1,y1,z1 (in the world after --up; write --box=-1,... when it "
                                  "starts with a minus) instead of the one carved from masks or placed by the cameras")
-    f.add_argument("--up", help="the world's up axis, x,y,z or auto (the mean of the cameras' up vectors); the world is "
+    f.add_argument("--up", help="the world's up axis, x,y,z or auto (square to the cameras' level x axes); the world is "
                                 "turned so that it becomes +z (default: auto for nerfstudio and COLMAP, as given for "
                                 "Blender and builtin; 0,0,1 keeps it)")
     f.add_argument("--size", type=int, default=200, help="view size of builtin scenes")
