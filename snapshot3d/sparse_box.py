@@ -50,8 +50,8 @@ class SparseBoxConfig:
     iterations: int = 400          # RANSAC draws
     spread: tuple = (1, 2, 3)      # the band is widened by these factors in turn until a plane passes: points from
     #                                poses a little off scatter about the ground (0.5 deg: 17% within 1x of it)
-    scatter_quantile: float = 0.99  # in a widened band, the object's points lie higher over the ground than this
-    #                                quantile of the depths under it
+    scatter_quantile: float = 0.99  # where 5% of the points under the ground lie deeper than the object's points
+    #                                must rise, they must rise higher than this quantile of those depths
 
 
 def _projection(c2w: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:
@@ -115,8 +115,8 @@ def sparse_points(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray,
 def find_ground(points: np.ndarray, box: np.ndarray, cfg: SparseBoxConfig = SparseBoxConfig()):
     """points (M, 3) world; box (2, 3) the first box (its centre the cameras' look-at point) -> ((a, b, c) of the
     ground plane z = a x + b y + c, its points' mask (M,) bool, the band's factor of `spread`), or None when no
-    plane under the look-at point holds min_ground_share of the points there with at most max_below_share of them
-    below it, at any band of `spread`."""
+    plane under the look-at point within max_tilt_deg of horizontal holds min_ground_share of the points there with
+    at most max_below_share of them below it, at any band of `spread`."""
     for factor in cfg.spread:
         found = _ground_plane(points, np.asarray(box, np.float64), cfg, factor)
         if found is not None:
@@ -191,9 +191,9 @@ def box_from_points(points: np.ndarray, box: np.ndarray,
     height = points[:, 2] - points[:, :2] @ np.array([a, b]) - c
     inside = np.all((points >= box[0]) & (points <= box[1]), axis=1)
     above = 3 * factor * cfg.tolerance * half
-    if factor != cfg.spread[0] and np.any(inside & (height < 0)):
-        # scattered points: those under an opaque ground are its scatter, and as much lies over it
-        above = max(above, float(np.quantile(-height[inside & (height < 0)], cfg.scatter_quantile)))
+    under = -height[inside & (height < 0)]   # under an opaque ground lies only its scatter, and as much lies over it
+    if len(under) and np.quantile(under, 0.95) > above:   # scattered points (poses a little off)
+        above = float(np.quantile(under, cfg.scatter_quantile))
     obj = _clustered(points[inside & (height > above)], cfg.knn_radius * half, cfg)
     info.update(sparse_ground=round(ground_z, 4), ground_points=int(on_ground.sum()), object_points=int(len(obj)),
                 ground_tilt_deg=round(float(np.degrees(np.arctan(np.hypot(a, b)))), 2), ground_band=factor)

@@ -52,6 +52,17 @@ def test_a_ground_scattered_by_poses_a_little_off_is_found_in_a_wider_band(rng):
     assert np.all(box[0, :2] <= OBJECT[0, :2]) and np.all(box[1] >= OBJECT[1])
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_scattered_ground_is_not_taken_for_the_object(seed):
+    # the scattered ground's points over the band are not the object's: the sides are cut round the object (at seed
+    # 1 the band of 1 passes, so the rule must not hang on the band's width)
+    box, info = box_from_points(_points(np.random.default_rng(seed), noise=0.08), FIRST)
+    cfg = SparseBoxConfig()
+    grow = cfg.margin * (OBJECT[1] - OBJECT[0]) + cfg.pad * 1.6
+    assert np.all(box[0, :2] <= OBJECT[0, :2]) and np.all(box[1] >= OBJECT[1])
+    assert np.all(box[0, :2] >= (OBJECT[0] - grow)[:2] - 0.1) and np.all(box[1, :2] <= (OBJECT[1] + grow)[:2] + 0.1)
+
+
 @pytest.mark.parametrize("case", ["steep", "nothing on it", "seen under it", "too few"])
 def test_points_that_show_no_ground_with_an_object_give_no_box(rng, case):
     pts = {"steep": lambda: _points(rng, tilt_deg=35.0),
