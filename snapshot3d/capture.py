@@ -90,8 +90,8 @@ def cameras_up(c2w: np.ndarray) -> tuple[np.ndarray, str]:
     mean_up = c2w[:, :3, 1].astype(np.float64).mean(0)
     if np.linalg.norm(mean_up) < 1e-3:
         raise UserError("--up auto: the cameras' up vectors cancel out (no common up); give --up x,y,z")
-    _, s, vt = np.linalg.svd(x, full_matrices=False)
-    if len(x) >= 3 and s[1] / np.sqrt(len(x)) >= UPRIGHT_SPREAD:
+    _, s, vt = np.linalg.svd(x)   # vt (3, 3): two cameras' x axes leave the third direction, their cross product
+    if len(s) > 1 and s[1] / np.sqrt(len(x)) >= UPRIGHT_SPREAD:
         u, how = vt[2], "auto: square to the cameras' level x axes"
     else:
         u, how = mean_up - vt[0] * float(vt[0] @ mean_up), "auto: the cameras' mean up, square to their x axes"

@@ -44,6 +44,14 @@ def test_partial_arc_looking_down():
     assert _deg(turn @ true_up, np.array([0, 0, 1.0])) < 1.0
 
 
+def test_two_cameras_a_quarter_turn_apart_fix_up():
+    # two level x axes fix up as their cross product, where the two views' mean up leans 9 degrees toward the object
+    c2w = np.stack([look_at(np.array([3.0, 0, 1]), np.zeros(3)), look_at(np.array([0, 3.0, 1]), np.zeros(3))])
+    up, how = cameras_up(c2w)
+    assert _deg(up, np.array([0, 0, 1.0])) < 1e-6 and how == "auto: square to the cameras' level x axes"
+    assert _deg(c2w[:, :3, 1].mean(0), np.array([0, 0, 1.0])) > 5
+
+
 def test_one_sided_capture_falls_back_to_the_mean_up():
     # views from one side only (x axes within 3 degrees): up is the mean up made square to their x axes
     c2w = _arc(12, (-3, 3), (10, 40), 0.0, seed=1)
