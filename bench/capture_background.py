@@ -49,7 +49,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),
-         "outer-density-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "sparse_box": False})}
+         "outer-density-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "sparse_box": False}),
+         "outer-nobox-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "object_box": 0.0})}
 # `bench fit --captures` (issue 40 item 4): this bench with these settings
 CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size": 128, "views": 48, "steps": 150,
                     "occ_warmup": 32, "plane_res": 64, "plane_channels": 8, "seed": 0}
