@@ -117,21 +117,26 @@ def find_ground(points: np.ndarray, box: np.ndarray, cfg: SparseBoxConfig = Spar
     ground plane z = a x + b y + c, its points' mask (M,) bool, the band's factor of `spread`), or None when no
     plane under the look-at point within max_tilt_deg of horizontal holds min_ground_share of the points there with
     at most max_below_share of them below it, at any band of `spread`."""
-    for factor in cfg.spread:
-        found = _ground_plane(points, np.asarray(box, np.float64), cfg, factor)
-        if found is not None:
-            return (*found, factor)
-    return None
-
-
-def _ground_plane(points: np.ndarray, box: np.ndarray, cfg: SparseBoxConfig, factor: float):
-    """`find_ground` with its band `factor` times `tolerance` -> (plane, mask) or None."""
+    box = np.asarray(box, np.float64)
     centre, half = box.mean(0), float((box[1] - box[0]).max()) / 2
     under = np.all((points[:, :2] >= box[0, :2]) & (points[:, :2] <= box[1, :2]), axis=1) & (points[:, 2] < centre[2])
     low = points[under]
     if len(low) < cfg.min_points:
         return None
-    tol, rng = factor * cfg.tolerance * half, np.random.default_rng(0)
+    for factor in cfg.spread:
+        found = _ground_plane(low, factor * cfg.tolerance * half, cfg)
+        if found is not None:
+            plane, on_low = found
+            mask = np.zeros(len(points), bool)
+            mask[np.nonzero(under)[0][on_low]] = True
+            return plane, mask, factor
+    return None
+
+
+def _ground_plane(low: np.ndarray, tol: float, cfg: SparseBoxConfig):
+    """The points under the look-at point (L, 3) and the band's half-width `tol` -> ((a, b, c), the points on it
+    (L,) bool) or None (`find_ground`'s tests)."""
+    rng = np.random.default_rng(0)
     best, best_n = None, 0
     for _ in range(cfg.iterations):   # any plane up to 60 degrees: a steeper floor must win, then be refused
         p = low[rng.choice(len(low), 3, replace=False)]
@@ -153,9 +158,7 @@ def _ground_plane(points: np.ndarray, box: np.ndarray, cfg: SparseBoxConfig, fac
     if np.mean(np.abs(resid) < tol) < cfg.min_ground_share or np.mean(resid < -3 * tol) > cfg.max_below_share or \
             np.hypot(plane[0], plane[1]) > np.tan(np.radians(cfg.max_tilt_deg)):
         return None
-    mask = np.zeros(len(points), bool)
-    mask[np.nonzero(under)[0][np.abs(resid) < tol]] = True
-    return tuple(float(v) for v in plane), mask
+    return tuple(float(v) for v in plane), np.abs(resid) < tol
 
 
 def _clustered(points: np.ndarray, radius: float, cfg: SparseBoxConfig) -> np.ndarray:
