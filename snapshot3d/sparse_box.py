@@ -22,9 +22,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .colmap import OPENCV_TO_OPENGL
+from .bundle import BundleConfig, adjust_poses, loose_matches, pair_points, projection, tracks
 
-__all__ = ["SparseBoxConfig", "sparse_points", "find_ground", "box_from_points", "sparse_box"]
+__all__ = ["SparseBoxConfig", "features", "points_from_matches", "sparse_points", "adjusted_poses", "find_ground",
+           "box_from_points", "sparse_box"]
 
 
 @dataclass(frozen=True)
@@ -50,17 +51,10 @@ class SparseBoxConfig:
     iterations: int = 400          # RANSAC draws
     spread: tuple = (1, 2, 3)      # the band is widened by these factors in turn until a plane passes: points from
     #                                poses a little off scatter about the ground (0.5 deg: 17% within 1x of it)
+    bundle: bool = True            # adjust the poses to the matches first (`snapshot3d.bundle`): poses a little off
+    #                                scatter the points (0.5 deg: the teapot's box cut through it without)
     scatter_quantile: float = 0.99  # where 5% of the points under the ground lie deeper than the object's points
     #                                must rise, they must rise higher than this quantile of those depths
-
-
-def _projection(c2w: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:
-    """(4, 4) OpenGL camera-to-world and (fx, fy, cx, cy) -> (3, 4) OpenCV projection matrix K [R | t], in the
-    intrinsics' own pixel convention (centres at +0.5, `snapshot3d.cameras`)."""
-    fx, fy, cx, cy = (float(v) for v in intrinsics)
-    k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]])
-    w2c = OPENCV_TO_OPENGL @ np.linalg.inv(np.asarray(c2w, np.float64))   # the flip is its own inverse
-    return k @ w2c[:3]
 
 
 def _pairs(c2w: np.ndarray, cfg: SparseBoxConfig) -> list[tuple[int, int]]:
@@ -78,38 +72,59 @@ def _pairs(c2w: np.ndarray, cfg: SparseBoxConfig) -> list[tuple[int, int]]:
     return sorted(out)
 
 
+def features(images: np.ndarray, c2w: np.ndarray, cfg: SparseBoxConfig = SparseBoxConfig()) -> tuple[list, list]:
+    """images (N, H, W, 3) float32 RGB in [0, 1], c2w (N, 4, 4) OpenGL -> (per frame its SIFT keypoints (K, 2)
+    float64 in the +0.5 pixel-centre convention of `snapshot3d.cameras`, and the matches [(i, j, a (M,), b (M,))]:
+    frame i's keypoint a[k] is frame j's b[k], for each pair of near cameras (ratio test))."""
+    # precise upscale: SIFT's first octave maps pixel x to 2x; OpenCV's default upscale shifts keypoints by about a
+    # quarter pixel (opencv/opencv#23123), which put the ground found 0.01 off on the composites (docs/capture.md)
+    sift = cv2.SIFT_create(nfeatures=cfg.features, contrastThreshold=0.01, enable_precise_upscale=True)
+    found = [sift.detectAndCompute(cv2.cvtColor(np.clip(im * 255 + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_RGB2GRAY),
+                                   None) for im in images]
+    keypoints = [np.float64([k.pt for k in kp]).reshape(-1, 2) + 0.5 for kp, _ in found]   # OpenCV's centres: +0.5
+    matcher, matches = cv2.BFMatcher(cv2.NORM_L2), []
+    for i, j in _pairs(np.asarray(c2w, np.float64), cfg):
+        di, dj = found[i][1], found[j][1]
+        if di is None or dj is None or len(di) < 2 or len(dj) < 2:
+            continue
+        good = [m[0] for m in matcher.knnMatch(di, dj, k=2)
+                if len(m) == 2 and m[0].distance < cfg.ratio * m[1].distance]
+        if len(good) >= 8:
+            matches.append((i, j, np.array([g.queryIdx for g in good]), np.array([g.trainIdx for g in good])))
+    return keypoints, matches
+
+
+def points_from_matches(keypoints: list, matches: list, c2w: np.ndarray, intrinsics: np.ndarray,
+                        cfg: SparseBoxConfig = SparseBoxConfig()) -> np.ndarray:
+    """`features`' keypoints and matches, c2w (N, 4, 4) OpenGL, intrinsics (N, 4) -> (M, 3) float64 world points,
+    one a match, kept where they reproject within reproj_px in both frames with min_parallax_deg between the rays."""
+    proj, out = [projection(c, k) for c, k in zip(c2w, intrinsics)], []
+    for i, j, a, b in matches:
+        pts, ok = pair_points(proj[i], proj[j], keypoints[i][a].T, keypoints[j][b].T, cfg.reproj_px)
+        u, v = pts - c2w[i, :3, 3], pts - c2w[j, :3, 3]
+        cos = (u * v).sum(1) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-12)
+        out.append(pts[ok & (cos < np.cos(np.radians(cfg.min_parallax_deg)))])
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
 def sparse_points(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray,
                   cfg: SparseBoxConfig = SparseBoxConfig()) -> np.ndarray:
     """images (N, H, W, 3) float32 RGB in [0, 1], c2w (N, 4, 4) OpenGL, intrinsics (N, 4) (fx, fy, cx, cy) of
     undistorted frames -> (M, 3) float64 world points triangulated from matched SIFT features (M may be 0)."""
-    # precise upscale: SIFT's first octave maps pixel x to 2x; OpenCV's default upscale shifts keypoints by about a
-    # quarter pixel (opencv/opencv#23123), which put the ground found 0.01 off on the composites (docs/capture.md)
-    sift = cv2.SIFT_create(nfeatures=cfg.features, contrastThreshold=0.01, enable_precise_upscale=True)
-    feats = [sift.detectAndCompute(cv2.cvtColor(np.clip(im * 255 + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_RGB2GRAY),
-                                   None) for im in images]
-    proj = [_projection(c, k) for c, k in zip(c2w, intrinsics)]
-    matcher, out = cv2.BFMatcher(cv2.NORM_L2), []
-    for i, j in _pairs(np.asarray(c2w, np.float64), cfg):
-        (ki, di), (kj, dj) = feats[i], feats[j]
-        if di is None or dj is None or len(ki) < 2 or len(kj) < 2:
-            continue
-        good = [m[0] for m in matcher.knnMatch(di, dj, k=2)
-                if len(m) == 2 and m[0].distance < cfg.ratio * m[1].distance]
-        if len(good) < 8:
-            continue
-        xi = np.float64([ki[g.queryIdx].pt for g in good]).T + 0.5   # OpenCV's pixel centres (integers) to +0.5
-        xj = np.float64([kj[g.trainIdx].pt for g in good]).T + 0.5
-        h = cv2.triangulatePoints(proj[i], proj[j], xi, xj)
-        pts = (h[:3] / np.where(np.abs(h[3]) > 1e-12, h[3], 1e-12)).T
-        ok = np.ones(len(pts), bool)
-        for p, x in ((proj[i], xi), (proj[j], xj)):
-            q = p @ np.c_[pts, np.ones(len(pts))].T
-            ok &= (q[2] > 0) & (np.linalg.norm(q[:2] / np.where(q[2] > 0, q[2], 1.0) - x, axis=0) < cfg.reproj_px)
-        a, b = pts - c2w[i, :3, 3], pts - c2w[j, :3, 3]
-        cos = (a * b).sum(1) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-12)
-        ok &= cos < np.cos(np.radians(cfg.min_parallax_deg))
-        out.append(pts[ok])
-    return np.concatenate(out) if out else np.zeros((0, 3))
+    keypoints, matches = features(images, c2w, cfg)
+    return points_from_matches(keypoints, matches, np.asarray(c2w, np.float64), intrinsics, cfg)
+
+
+def adjusted_poses(keypoints: list, matches: list, c2w: np.ndarray, intrinsics: np.ndarray,
+                   cfg: BundleConfig = BundleConfig()) -> tuple[np.ndarray, dict]:
+    """`features`' keypoints and matches at the poses c2w (N, 4, 4) OpenGL, intrinsics (N, 4) -> the poses after
+    `snapshot3d.bundle.adjust_poses` over the matches' tracks (N, 4, 4) float64, and its report."""
+    c2w = np.asarray(c2w, np.float64)
+    loose = loose_matches(matches, keypoints, [projection(c, k) for c, k in zip(c2w, intrinsics)], cfg)
+    track, frame, feature = tracks(loose, [len(k) for k in keypoints])
+    offset = np.cumsum([0] + [len(k) for k in keypoints])
+    pixels = np.concatenate(keypoints)[offset[frame] + feature]
+    return adjust_poses(c2w, intrinsics, track, frame, pixels, cfg)
 
 
 def find_ground(points: np.ndarray, box: np.ndarray, cfg: SparseBoxConfig = SparseBoxConfig()):
@@ -174,10 +189,16 @@ def _clustered(points: np.ndarray, radius: float, cfg: SparseBoxConfig) -> np.nd
 
 
 def sparse_box(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, box: np.ndarray,
-               cfg: SparseBoxConfig = SparseBoxConfig()) -> tuple[np.ndarray | None, dict]:
+               cfg: SparseBoxConfig = SparseBoxConfig()) -> tuple[np.ndarray | None, dict, np.ndarray]:
     """Training frames (`sparse_points`' layout) and the first box (2, 3) -> (the box (2, 3) float32 cut at the
-    ground and round the object's points, or None; what was found, for the report)."""
-    return box_from_points(sparse_points(images, c2w, intrinsics, cfg), box, cfg)
+    ground and round the object's points, or None; what was found, for the report; the poses (N, 4, 4) float64 the
+    points were triangulated at: after the bundle adjustment with cfg.bundle, else c2w)."""
+    keypoints, matches = features(images, c2w, cfg)
+    c2w, adjusted = np.asarray(c2w, np.float64), None
+    if cfg.bundle:
+        c2w, adjusted = adjusted_poses(keypoints, matches, c2w, intrinsics)
+    out, info = box_from_points(points_from_matches(keypoints, matches, c2w, intrinsics, cfg), box, cfg)
+    return out, {**info, **({"bundle": adjusted} if adjusted else {})}, c2w
 
 
 def box_from_points(points: np.ndarray, box: np.ndarray,

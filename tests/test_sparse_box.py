@@ -93,11 +93,11 @@ def test_a_rendered_capture_gives_its_ground_and_a_box_round_the_object_without_
 
     posed = with_overlap_box(load_scene(str(capture / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0))))
     true = np.array(json.loads((capture / "gt/truth.json").read_text())["box"])
-    box, info = tighten_box(posed, None, FitConfig(background="outer"))   # no decoder: no fit may run
+    box, info, poses = tighten_box(posed, None, FitConfig(background="outer"))   # no decoder: no fit may run
     assert info["box_from"] == "sparse points" and info["prefit_steps"] == 0 and info["sparse_points"] > 1000
     assert abs(info["ground_z"] - true[0, 2]) < 0.03 * (true[1, 2] - true[0, 2])
     assert np.all(box[0, :2] <= true[0, :2]) and np.all(box[1] >= true[1])
     assert np.prod(box[1] - box[0]) < 0.5 * np.prod(posed.box[1] - posed.box[0])
-    floor_only, _ = tighten_box(posed, None, FitConfig(background="outer", tighten_sides=False))
+    floor_only, _, _ = tighten_box(posed, None, FitConfig(background="outer", tighten_sides=False))
     assert floor_only[0, 2] == box[0, 2] and np.array_equal(floor_only[:, :2], posed.box[:, :2])
     assert floor_only[1, 2] == posed.box[1, 2]

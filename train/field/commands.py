@@ -145,7 +145,11 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
     capture account updated; and what the tightening found."""
 
     from .box_tighten import object_box, tighten_box
-    box, info = tighten_box(posed, decoder, cfg, device)
+    box, info, adjusted = tighten_box(posed, decoder, cfg, device)
+    if adjusted is not None:   # the fit starts from the bundle-adjusted training poses (cfg.bundle "fit")
+        c2w = posed.c2w.copy()
+        c2w[posed.train] = adjusted
+        posed = replace(posed, c2w=c2w)
     read = posed.info["capture"]
     ground = f", the ground at z = {info['ground_z']:.3g}" if info["ground_z"] is not None else ""
     ground += ", sides and top cut" if info.get("sides_cut") else ""

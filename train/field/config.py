@@ -98,6 +98,9 @@ class FitConfig:
                                     "from the training photos' sparse 3D points (SIFT matched and triangulated at the "
                                     "capture's poses, snapshot3d/sparse_box.py) before the short pre-fit, which then "
                                     "runs only when they show no ground with an object on it")
+    bundle: str = config_field("box", "with --sparse-box: adjust the training poses to the photos' matched features "
+                               "first (a small bundle adjustment, snapshot3d/bundle.py): box: for the sparse box "
+                               "only; fit: the fit starts from the adjusted poses too; off")
     object_steps: float = config_field(0.5, "with --background outer: after the fit, this share of its steps more "
                                        "takes the planes to the object alone, against their own views with the "
                                        "ground, the shadow and the haze cut away (train/field/object_carve.py; "
@@ -160,6 +163,7 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
     for option, value, allowed in (("ending", cfg.ending, ("auto", "plain")),
                                    ("background", cfg.background, ("auto", "white", "outer")),
                                    ("refine-poses", cfg.refine_poses, ("auto", "on", "off")),
+                                   ("bundle", cfg.bundle, ("box", "fit", "off")),
                                    ("head", cfg.head, ("auto", "on", "off"))):
         if value not in allowed:
             problems.append(f"--{option} must be {', '.join(allowed[:-1])} or {allowed[-1]}, not {value!r}")
