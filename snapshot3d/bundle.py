@@ -34,8 +34,10 @@ __all__ = ["BundleConfig", "tracks", "triangulate", "adjust_poses", "projection"
 class BundleConfig:
     loose_px: float = 2.0      # a pair's match joins a track where it reprojects within this at the given poses
     robust_px: float = 0.5     # the soft-L1 loss's scale: larger errors count less than their square
-    prior_px: float = 3.0      # the gauge: a pose's pull back to where it was given (module docstring)
-    max_evaluations: int = 50  # of the residuals by least_squares
+    prior_px: float = 1.0      # the gauge: a pose's pull back to where it was given (module docstring)
+    max_evaluations: int = 50  # of the residuals by least_squares, a pass
+    passes: int = 2            # after each pass but the last, the tracks with an observation off by more than ...
+    trim_px: float = 1.0       # ... this are dropped, and the next pass starts again from the given poses
     min_tracks: int = 50       # fewer tracks than this: the poses are left as they are
 
 
@@ -104,35 +106,69 @@ def adjust_poses(c2w: np.ndarray, intrinsics: np.ndarray, track: np.ndarray, fra
     weight = cfg.prior_px * float(np.median(intrinsics[:, 0]))
     intr = np.asarray(intrinsics, np.float64)[frame]
 
-    def moved(pose):   # (n, 6) turns and shifts -> (n, 3, 3) rotations, (n, 3) shifts of world-to-camera
-        return Rotation.from_rotvec(pose[:, :3]).as_matrix() @ w2c[:, :3, :3], w2c[:, :3, 3] + pose[:, 3:]
-
-    def residuals(v):
-        (rot, shift), pts = moved(v[:6 * n].reshape(n, 6)), v[6 * n:].reshape(m, 3)
-        err = (_project(rot[frame], shift[frame], intr, pts[track]) - pixels).ravel()
-        pose = v[:6 * n].reshape(n, 6)
-        return np.r_[err, weight * pose[:, :3].ravel(), weight / dist * pose[:, 3:].ravel()]
-
-    o = len(track)
-    rows = np.r_[np.repeat(np.arange(2 * o), 6), np.repeat(np.arange(2 * o), 3), 2 * o + np.arange(6 * n)]
-    cols = np.r_[(6 * np.repeat(frame, 2)[:, None] + np.arange(6)).ravel(),
-                 (6 * n + 3 * np.repeat(track, 2)[:, None] + np.arange(3)).ravel(),
-                 (6 * np.arange(n)[:, None] + np.r_[0, 1, 2][None]).ravel().tolist() +
-                 (6 * np.arange(n)[:, None] + np.r_[3, 4, 5][None]).ravel().tolist()]
-    sparsity = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(2 * o + 6 * n, 6 * n + 3 * m))
-    v0 = np.r_[np.zeros(6 * n), points.ravel()]
-    before = np.median(np.abs(residuals(v0)[:2 * o]))
-    res = least_squares(residuals, v0, jac_sparsity=sparsity, x_scale="jac", loss="soft_l1", f_scale=cfg.robust_px,
-                        method="trf", max_nfev=cfg.max_evaluations)
-    pose = res.x[:6 * n].reshape(n, 6)
-    rot, shift = moved(pose)
+    first, keep = None, np.ones(len(track), bool)
+    for k in range(cfg.passes):
+        kept, sub = np.unique(track[keep], return_inverse=True)
+        if k and len(kept) < cfg.min_tracks:
+            break
+        pose, err = _adjust(w2c, weight, dist, intr[keep], sub, frame[keep], pixels[keep], points[kept], cfg)
+        first, used = err if first is None else first, len(kept)
+        bad = np.zeros(m, bool)   # a track with any observation off, triangulated again at the adjusted poses
+        bad[track[_reprojection(_moved(w2c, pose), intrinsics, track, frame, pixels) > cfg.trim_px]] = True
+        keep &= ~bad[track]
+    rot, shift = _moved(w2c, pose)
     out = np.tile(np.eye(4), (n, 1, 1))
     out[:, :3, :3], out[:, :3, 3] = rot, shift
     out = np.linalg.inv(OPENCV_TO_OPENGL @ out)
-    return out, {"tracks": m, "observations": o, "adjusted": True,
-                 "median_error_px": [round(float(before), 3), round(float(np.median(np.abs(res.fun[:2 * o]))), 3)],
+    return out, {"tracks": m, "observations": len(track), "adjusted": True,
+                 "tracks_last_pass": used,
+                 "median_error_px": [round(float(np.median(first[0])), 3), round(float(np.median(err[1])), 3)],
                  "median_turn_deg": round(float(np.degrees(np.median(np.linalg.norm(pose[:, :3], axis=1)))), 3),
                  "median_shift": round(float(np.median(np.linalg.norm(out[:, :3, 3] - c2w[:, :3, 3], axis=1))), 4)}
+
+
+def _reprojection(moved: tuple, intrinsics: np.ndarray, track: np.ndarray, frame: np.ndarray,
+                  pixels: np.ndarray) -> np.ndarray:
+    """((n, 3, 3) rotations, (n, 3) shifts) of world-to-camera, intrinsics (n, 4), observations -> (O,) pixels
+    between each observation and its track's DLT point (`triangulate`) projected."""
+    rot, shift = moved
+    fx, fy, cx, cy = np.asarray(intrinsics, np.float64).T
+    k = np.zeros((len(rot), 3, 3))
+    k[:, 0, 0], k[:, 1, 1], k[:, 0, 2], k[:, 1, 2], k[:, 2, 2] = fx, fy, cx, cy, 1.0
+    proj = (k @ np.concatenate([rot, shift[:, :, None]], axis=2))[frame]
+    points = triangulate(track, pixels, proj)
+    q = np.einsum("oij,oj->oi", proj, np.c_[points[track], np.ones(len(track))])
+    return np.linalg.norm(q[:, :2] / np.where(np.abs(q[:, 2:]) > 1e-12, q[:, 2:], 1e-12) - pixels, axis=1)
+
+
+def _moved(w2c: np.ndarray, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 4, 4) world-to-camera and (n, 6) turns and shifts -> (n, 3, 3) rotations and (n, 3) shifts."""
+    return Rotation.from_rotvec(pose[:, :3]).as_matrix() @ w2c[:, :3, :3], w2c[:, :3, 3] + pose[:, 3:]
+
+
+def _adjust(w2c: np.ndarray, weight: float, dist: float, intr: np.ndarray, track: np.ndarray, frame: np.ndarray,
+            pixels: np.ndarray, points: np.ndarray,
+            cfg: BundleConfig) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """One pass of `adjust_poses` from the given poses w2c (n, 4, 4), the prior's weight per radian and per
+    distance `dist`, per observation (O, ...) its intrinsics, track, frame and pixels, and the tracks' first points
+    (T, 3) -> ((n, 6) turns and shifts, (each observation's error in pixels (O,) before, after))."""
+    n, m, o = len(w2c), len(points), len(track)
+    prior = np.r_[np.full(3, weight), np.full(3, weight / dist)]
+
+    def residuals(v):
+        (rot, shift), pts = _moved(w2c, v[:6 * n].reshape(n, 6)), v[6 * n:].reshape(m, 3)
+        err = (_project(rot[frame], shift[frame], intr, pts[track]) - pixels).ravel()
+        return np.r_[err, (prior * v[:6 * n].reshape(n, 6)).ravel()]   # row 2 O + 6 i + k: frame i's k-th
+
+    rows = np.r_[np.repeat(np.arange(2 * o), 6), np.repeat(np.arange(2 * o), 3), 2 * o + np.arange(6 * n)]
+    cols = np.r_[(6 * np.repeat(frame, 2)[:, None] + np.arange(6)).ravel(),
+                 (6 * n + 3 * np.repeat(track, 2)[:, None] + np.arange(3)).ravel(), np.arange(6 * n)]
+    sparsity = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(2 * o + 6 * n, 6 * n + 3 * m))
+    v0 = np.r_[np.zeros(6 * n), points.ravel()]
+    res = least_squares(residuals, v0, jac_sparsity=sparsity, x_scale="jac", loss="soft_l1", f_scale=cfg.robust_px,
+                        method="trf", max_nfev=cfg.max_evaluations)
+    norm = [np.linalg.norm(residuals(v)[:2 * o].reshape(o, 2), axis=1) for v in (v0, res.x)]
+    return res.x[:6 * n].reshape(n, 6), (norm[0], norm[1])
 
 
 def projection(c2w: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:
