@@ -41,6 +41,7 @@ class SparseBoxConfig:
     min_ground_share: float = 0.2  # the ground holds this share of the points under the look-at point
     max_below_share: float = 0.1   # and at most this share lie below it (an opaque floor hides what is under)
     min_points: int = 30           # points the ground and the object each need
+    min_side_points: int = 120     # the sides and top are cut round the object's points when it has this many
     knn: int = 5                   # the object's points: those whose knn-th nearest lies within ...
     knn_radius: float = 0.15       # ... this share of the first box's half-size (stray matches lie apart)
     max_object_points: int = 4000  # a larger object's points are subsampled to this first (fixed seed)
@@ -223,10 +224,13 @@ def box_from_points(points: np.ndarray, box: np.ndarray,
                 ground_tilt_deg=round(float(np.degrees(np.arctan(np.hypot(a, b)))), 2), ground_band=factor)
     if len(obj) < cfg.min_points:
         return None, info
-    lo, hi = np.quantile(obj, cfg.quantile, axis=0), np.quantile(obj, 1 - cfg.quantile, axis=0)
-    span = hi - lo
-    grow = cfg.margin * span + cfg.pad * half
-    out = np.stack([np.maximum(box[0], lo - grow), np.minimum(box[1], hi + grow)])
+    info["sides_from_points"] = len(obj) >= cfg.min_side_points
+    if info["sides_from_points"]:
+        lo, hi = np.quantile(obj, cfg.quantile, axis=0), np.quantile(obj, 1 - cfg.quantile, axis=0)
+        grow = cfg.margin * (hi - lo) + cfg.pad * half
+        out = np.stack([np.maximum(box[0], lo - grow), np.minimum(box[1], hi + grow)])
+    else:   # a few points on the object's textured parts only (the teapot seen 32 times: 45, on its spout and lid)
+        out = box.copy()
     # where the band had to widen, the plane itself: the plane of many scattered points lies near the ground all
     # the same, and a floor above it would cut the object's base
     out[0, 2] = max(box[0, 2], ground_z + (cfg.floor_lift * half if factor == cfg.spread[0] else 0.0))

@@ -74,6 +74,19 @@ def test_points_that_show_no_ground_with_an_object_give_no_box(rng, case):
     assert box is None and info["sparse_points"] == len(pts)
 
 
+def test_a_few_object_points_cut_the_floor_but_not_the_sides(rng):
+    """An object with fewer than min_side_points points (here 60, in a corner of it): the box's floor is cut at the
+    ground, its sides and top stay where the first box has them, and the report says so."""
+    corner = rng.uniform([0.2, 0.4, 0.6], [0.4, 0.6, 0.8], (60, 3))
+    pts = np.concatenate([_points(rng, objects=0, strays=0), corner])
+    box, info = box_from_points(pts, FIRST)
+    assert info["object_points"] >= SparseBoxConfig().min_points and not info["sides_from_points"]
+    np.testing.assert_array_equal(box[:, :2], FIRST[:, :2].astype(np.float32))
+    assert box[1, 2] == np.float32(FIRST[1, 2]) and -1.0 < box[0, 2] < -0.9
+    many, more = box_from_points(_points(rng, strays=0), FIRST)
+    assert more["sides_from_points"] and np.all(many[1] - many[0] < FIRST[1] - FIRST[0])
+
+
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory):
     from snapshot3d.make_capture import make_capture
@@ -101,3 +114,37 @@ def test_a_rendered_capture_gives_its_ground_and_a_box_round_the_object_without_
     floor_only, _, _ = tighten_box(posed, None, FitConfig(background="outer", tighten_sides=False))
     assert floor_only[0, 2] == box[0, 2] and np.array_equal(floor_only[:, :2], posed.box[:, :2])
     assert floor_only[1, 2] == posed.box[1, 2]
+
+
+def test_poses_half_a_degree_off_are_adjusted_before_the_box_which_then_holds_the_object(tmp_path):
+    """The teapot's capture (32 frames) with poses written 0.5 deg / 1% off: the bundle adjustment
+    (snapshot3d/bundle.py) brings the training poses at least a third nearer the true ones, and the sparse box at
+    the adjusted poses finds the ground in the narrowest band, within 3% of the object's height, and holds the
+    object's true box (its few points, on the spout and the lid, leave the sides uncut; at the given poses no ground
+    passes the narrowest band, docs/capture.md)."""
+    from scipy.spatial.transform import Rotation
+
+    from snapshot3d.capture import CaptureOptions
+    from snapshot3d.loaders import load_scene
+    from snapshot3d.make_capture import make_capture
+    from snapshot3d.make_capture_config import SynthCaptureConfig
+    from snapshot3d.sparse_box import sparse_box
+
+    cap = make_capture("builtin:teapot", tmp_path / "cap", SynthCaptureConfig(size=128, views=32, pose_noise_deg=0.5,
+                                                                             pose_noise_frac=0.01))
+    up = CaptureOptions(up=(0.0, 0.0, 1.0), box="auto")
+    given, true = load_scene(str(cap / "transforms.json"), capture=up), load_scene(
+        str(cap / "gt/transforms_true.json"), capture=up)
+    t = given.train
+    box, info, adjusted = sparse_box(given.images[t], given.c2w[t], given.intrinsics[t], given.box)
+
+    def turn_deg(c2w):
+        rel = Rotation.from_matrix(c2w[:, :3, :3].astype(np.float64)) * Rotation.from_matrix(
+            true.c2w[t, :3, :3].astype(np.float64)).inv()
+        return float(np.degrees(np.median(np.linalg.norm(rel.as_rotvec(), axis=1))))
+
+    assert info["bundle"]["adjusted"] and turn_deg(adjusted) < 0.67 * turn_deg(given.c2w[t])
+    assert info["ground_band"] == 1
+    truth = np.array(json.loads((cap / "gt/truth.json").read_text())["box"])
+    assert box is not None and np.all(box[0, :2] <= truth[0, :2]) and np.all(box[1] >= truth[1])
+    assert abs(info["sparse_ground"] - truth[0, 2]) < 0.03 * (truth[1, 2] - truth[0, 2])

@@ -105,6 +105,7 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig,
                                      SparseBoxConfig(bundle=cfg.bundle != "off"))
         info.update(found, sparse_seconds=round(time.perf_counter() - t0, 1))
         if box is not None:
+            info["sides_cut"] = bool(cfg.tighten_sides and found["sides_from_points"])
             if not cfg.tighten_sides:   # the floor alone
                 floor, box = box[0, 2], np.array(posed.box, np.float32)
                 box[0, 2] = floor

@@ -98,9 +98,10 @@ class FitConfig:
                                     "from the training photos' sparse 3D points (SIFT matched and triangulated at the "
                                     "capture's poses, snapshot3d/sparse_box.py) before the short pre-fit, which then "
                                     "runs only when they show no ground with an object on it")
-    bundle: str = config_field("box", "with --sparse-box: adjust the training poses to the photos' matched features "
-                               "first (a small bundle adjustment, snapshot3d/bundle.py): box: for the sparse box "
-                               "only; fit: the fit starts from the adjusted poses too; off")
+    bundle: str = config_field("fit", "with --sparse-box: adjust the training poses to the photos' matched features "
+                               "first (a small bundle adjustment, snapshot3d/bundle.py): fit: the box is cut from "
+                               "the points at the adjusted poses and the fit starts from them; box: the box only; "
+                               "off")
     object_steps: float = config_field(0.5, "with --background outer: after the fit, this share of its steps more "
                                        "takes the planes to the object alone, against their own views with the "
                                        "ground, the shadow and the haze cut away (train/field/object_carve.py; "
