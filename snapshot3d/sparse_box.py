@@ -41,7 +41,6 @@ class SparseBoxConfig:
     min_ground_share: float = 0.2  # the ground holds this share of the points under the look-at point
     max_below_share: float = 0.1   # and at most this share lie below it (an opaque floor hides what is under)
     min_points: int = 30           # points the ground and the object each need
-    min_side_points: int = 120     # the sides and top are cut round the object's points when it has this many
     knn: int = 5                   # the object's points: those whose knn-th nearest lies within ...
     knn_radius: float = 0.15       # ... this share of the first box's half-size (stray matches lie apart)
     max_object_points: int = 4000  # a larger object's points are subsampled to this first (fixed seed)
@@ -54,6 +53,7 @@ class SparseBoxConfig:
     #                                poses a little off scatter about the ground (0.5 deg: 17% within 1x of it)
     bundle: bool = True            # adjust the poses to the matches first (`snapshot3d.bundle`): poses a little off
     #                                scatter the points (0.5 deg: the teapot's box cut through it without)
+    scatter_trigger: float = 0.95  # the share of the points under the ground that must lie deeper than three bands
     scatter_quantile: float = 0.99  # where 5% of the points under the ground lie deeper than the object's points
     #                                must rise, they must rise higher than this quantile of those depths
 
@@ -217,20 +217,16 @@ def box_from_points(points: np.ndarray, box: np.ndarray,
     inside = np.all((points >= box[0]) & (points <= box[1]), axis=1)
     above = 3 * factor * cfg.tolerance * half
     under = -height[inside & (height < 0)]   # under an opaque ground lies only its scatter, and as much lies over it
-    if len(under) and np.quantile(under, 0.95) > above:   # scattered points (poses a little off)
+    if len(under) and np.quantile(under, cfg.scatter_trigger) > above:   # scattered points (poses a little off)
         above = float(np.quantile(under, cfg.scatter_quantile))
     obj = _clustered(points[inside & (height > above)], cfg.knn_radius * half, cfg)
     info.update(sparse_ground=round(ground_z, 4), ground_points=int(on_ground.sum()), object_points=int(len(obj)),
                 ground_tilt_deg=round(float(np.degrees(np.arctan(np.hypot(a, b)))), 2), ground_band=factor)
     if len(obj) < cfg.min_points:
         return None, info
-    info["sides_from_points"] = len(obj) >= cfg.min_side_points
-    if info["sides_from_points"]:
-        lo, hi = np.quantile(obj, cfg.quantile, axis=0), np.quantile(obj, 1 - cfg.quantile, axis=0)
-        grow = cfg.margin * (hi - lo) + cfg.pad * half
-        out = np.stack([np.maximum(box[0], lo - grow), np.minimum(box[1], hi + grow)])
-    else:   # a few points on the object's textured parts only (the teapot seen 32 times: 45, on its spout and lid)
-        out = box.copy()
+    lo, hi = np.quantile(obj, cfg.quantile, axis=0), np.quantile(obj, 1 - cfg.quantile, axis=0)
+    grow = cfg.margin * (hi - lo) + cfg.pad * half
+    out = np.stack([np.maximum(box[0], lo - grow), np.minimum(box[1], hi + grow)])
     # where the band had to widen, the plane itself: the plane of many scattered points lies near the ground all
     # the same, and a floor above it would cut the object's base
     out[0, 2] = max(box[0, 2], ground_z + (cfg.floor_lift * half if factor == cfg.spread[0] else 0.0))

@@ -94,7 +94,8 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig,
     (`snapshot3d.sparse_box`, with cfg.sparse_box and cameras that look down), else tightened from a short fit with
     the background model (PREFIT_FRACTION of cfg.steps, at least 10) -> (box (2, 3) float32 world, info for the
     report: ground_z, and the sparse points' counts or the pre-fit's steps; the training views' poses (T, 4, 4)
-    float32 after the sparse box's bundle adjustment with cfg.bundle "fit", else None)."""
+    float32 after the sparse box's bundle adjustment with cfg.bundle "fit", where it ran and the box came from the
+    sparse points, else None)."""
     t0 = time.perf_counter()
     looks_down = bool(np.mean(-posed.c2w[posed.train, 2, 2] < 0) > 0.5)   # optical axes (-z) pointing down
     info = {"first_box": np.round(posed.box, 4).tolist(), "sides_cut": bool(cfg.tighten_sides)}
@@ -105,12 +106,12 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig,
                                      SparseBoxConfig(bundle=cfg.bundle != "off"))
         info.update(found, sparse_seconds=round(time.perf_counter() - t0, 1))
         if box is not None:
-            info["sides_cut"] = bool(cfg.tighten_sides and found["sides_from_points"])
             if not cfg.tighten_sides:   # the floor alone
                 floor, box = box[0, 2], np.array(posed.box, np.float32)
                 box[0, 2] = floor
             return box, {**info, "ground_z": float(box[0, 2]), "box_from": "sparse points", "prefit_steps": 0,
-                         "prefit_seconds": 0.0}, c2w.astype(np.float32) if cfg.bundle == "fit" else None
+                         "prefit_seconds": 0.0}, (
+                c2w.astype(np.float32) if cfg.bundle == "fit" and found.get("bundle", {}).get("adjusted") else None)
     return (*_tightened_by_prefit(posed, decoder, cfg, looks_down, info, device), None)
 
 

@@ -160,6 +160,9 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
         ground += f", then cut round the object's cells of a {more['object_box_steps']}-step fit"
     source = (f"{info['sparse_points']} sparse points of the photos ({info['object_points']} on the object)"
               if info["box_from"] == "sparse points" else f"{info['prefit_steps']} steps' density")
+    if adjusted is not None:
+        source += (f", at the training poses adjusted to the photos' matches (median turn "
+                   f"{info['bundle']['median_turn_deg']:.2f} deg, the fit starts from them)")
     read.update(box=box.tolist(), box_from=read["box_from"] + f"; tightened from {source}{ground}")
     if not quiet:
         lo, hi = (", ".join(f"{float(x):.3g}" for x in corner) for corner in box)
