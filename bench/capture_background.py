@@ -53,7 +53,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-nobox-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "object_box": 0.0}),
          "outer-nobundle-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "off"}),
          "outer-bundle-fit-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "fit"}),
-         "outer-bundle-box-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "box"})}
+         "outer-bundle-box-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "box"}),
+         "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"})}
 # `bench fit --captures` (issue 40 item 4): this bench with these settings
 CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size": 128, "views": 48, "steps": 150,
                     "occ_warmup": 32, "plane_res": 64, "plane_channels": 8, "seed": 0}

@@ -101,3 +101,17 @@ def test_exact_poses_stay_put_and_too_few_tracks_leave_the_poses_as_given():
     same, info = adjust_poses(true, np.tile(INTR, (len(true), 1)), track[few], frame[few], pixels[few],
                               BundleConfig(min_tracks=50))
     assert not info["adjusted"] and np.array_equal(same, true)
+
+
+@pytest.mark.parametrize("layout, refine, bundle", [("nerfstudio", "on", "fit"), ("colmap", "on", "fit"),
+                                                    ("blender", "off", "off"), ("builtin", "off", "off")])
+def test_bundle_auto_follows_the_pose_refinement(layout, refine, bundle):
+    """--bundle auto adjusts the poses to the photos' matches where the fit refines them (captures from a solver or
+    an app), not where they are exact; given values stay as given."""
+    from snapshot3d.train.field.commands import resolve_autos
+    from snapshot3d.train.field.config import FitConfig
+
+    cfg = resolve_autos(FitConfig(), layout, None)
+    assert (cfg.refine_poses, cfg.bundle) == (refine, bundle)
+    assert resolve_autos(FitConfig(refine_poses="on"), "blender", None).bundle == "fit"
+    assert resolve_autos(FitConfig(bundle="box"), layout, None).bundle == "box"

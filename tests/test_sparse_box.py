@@ -98,7 +98,9 @@ def test_a_rendered_capture_gives_its_ground_and_a_box_round_the_object_without_
     assert abs(info["ground_z"] - true[0, 2]) < 0.03 * (true[1, 2] - true[0, 2])
     assert np.all(box[0, :2] <= true[0, :2]) and np.all(box[1] >= true[1])
     assert np.prod(box[1] - box[0]) < 0.5 * np.prod(posed.box[1] - posed.box[0])
-    # --bundle fit (the default): the fit starts from the adjusted training poses, near the exact ones given here
+    assert poses is None and "bundle" not in info   # --bundle auto, unresolved: off (fit_scene resolves it)
+    # --bundle fit: the fit starts from the adjusted training poses, near the exact ones given here
+    _, info, poses = tighten_box(posed, None, FitConfig(background="outer", bundle="fit"))
     assert poses.shape == (len(posed.train), 4, 4) and info["bundle"]["adjusted"]
     assert np.abs(poses[:, :3, 3] - posed.c2w[posed.train, :3, 3]).max() < 0.01 * np.abs(posed.c2w[:, :3, 3]).max()
     assert tighten_box(posed, None, FitConfig(background="outer", bundle="box"))[2] is None

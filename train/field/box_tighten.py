@@ -95,7 +95,8 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig,
     the background model (PREFIT_FRACTION of cfg.steps, at least 10) -> (box (2, 3) float32 world, info for the
     report: ground_z, and the sparse points' counts or the pre-fit's steps; the training views' poses (T, 4, 4)
     float32 after the sparse box's bundle adjustment with cfg.bundle "fit", where it ran and the box came from the
-    sparse points, else None)."""
+    sparse points, else None). cfg.bundle "auto" is resolved by `fit_scene` (fit where the poses are refined); here
+    it counts as off."""
     t0 = time.perf_counter()
     looks_down = bool(np.mean(-posed.c2w[posed.train, 2, 2] < 0) > 0.5)   # optical axes (-z) pointing down
     info = {"first_box": np.round(posed.box, 4).tolist(), "sides_cut": bool(cfg.tighten_sides)}
@@ -103,7 +104,7 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig,
         from snapshot3d.sparse_box import SparseBoxConfig, sparse_box
         t = posed.train
         box, found, c2w = sparse_box(posed.images[t], posed.c2w[t], posed.intrinsics[t], posed.box,
-                                     SparseBoxConfig(bundle=cfg.bundle != "off"))
+                                     SparseBoxConfig(bundle=cfg.bundle in ("fit", "box")))
         info.update(found, sparse_seconds=round(time.perf_counter() - t0, 1))
         if box is not None:
             if not cfg.tighten_sides:   # the floor alone

@@ -23,8 +23,8 @@ from snapshot3d.validate import MESH_RES, SCENE_MAX_RES, VIEW_SIZE, check_views,
 from .config import FitConfig, check_fit_config
 from .curves import payload_hint
 
-__all__ = ["fit_scene", "fit_command", "render_command", "mesh_command", "train_decoder_command", "orbit_cameras",
-           "render_scene"]
+__all__ = ["fit_scene", "resolve_autos", "fit_command", "render_command", "mesh_command", "train_decoder_command",
+           "orbit_cameras", "render_scene"]
 
 
 def _bar(desc: str, total: int):
@@ -52,6 +52,18 @@ def _default_orbit(posed) -> Orbit:
     return Orbit(radius=round(radius, 4), target=tuple(float(x) for x in centre))
 
 
+def resolve_autos(cfg: FitConfig, layout: str | None, medium: str | None) -> FitConfig:
+    """cfg with its --head, --refine-poses and --bundle `auto` made on or off for an input of `layout` (the
+    loader's: nerfstudio, colmap, blender, builtin) and `medium` (print, file or None)."""
+    if cfg.head == "auto":   # the QR code carries a print's head; a file's planes are large enough without one
+        cfg = replace(cfg, head="on" if medium == "print" else "off")
+    if cfg.refine_poses == "auto":   # poses from a solver or an app are a little off; builtin and Blender's are exact
+        cfg = replace(cfg, refine_poses="on" if layout in ("nerfstudio", "colmap") else "off")
+    if cfg.bundle == "auto":   # the photos' matches refine the poses first where the fit refines them
+        cfg = replace(cfg, bundle="fit" if cfg.refine_poses == "on" else "off")
+    return cfg
+
+
 def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int = 1, checkpoint=None,
               size: int = 200, quiet: bool = False, device=None, medium: str | None = None, capture=None,
               channel=None):
@@ -73,10 +85,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         cfg, chose = replace(cfg, background=mode), f"{mode} ({why})"
         if mode == "outer" and (capture is None or capture.box is None):
             posed = with_overlap_box(posed)
-    if cfg.head == "auto":   # the QR code carries a print's head; a file's planes are large enough without one
-        cfg = replace(cfg, head="on" if medium == "print" else "off")
-    if cfg.refine_poses == "auto":   # poses from a solver or an app are a little off; builtin and Blender's are exact
-        cfg = replace(cfg, refine_poses="on" if posed.info.get("layout") in ("nerfstudio", "colmap") else "off")
+    cfg = resolve_autos(cfg, posed.info.get("layout"), medium)
     read = posed.info.get("capture")
     if read and not quiet:
         print(describe(read))

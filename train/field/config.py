@@ -98,10 +98,10 @@ class FitConfig:
                                     "from the training photos' sparse 3D points (SIFT matched and triangulated at the "
                                     "capture's poses, snapshot3d/sparse_box.py) before the short pre-fit, which then "
                                     "runs only when they show no ground with an object on it")
-    bundle: str = config_field("fit", "with --sparse-box: adjust the training poses to the photos' matched features "
+    bundle: str = config_field("auto", "with --sparse-box: adjust the training poses to the photos' matched features "
                                "first (a small bundle adjustment, snapshot3d/bundle.py): fit: the box is cut from "
                                "the points at the adjusted poses and the fit starts from them; box: the box only; "
-                               "off")
+                               "off; auto: fit where the poses are refined (--refine-poses), else off")
     object_steps: float = config_field(0.5, "with --background outer: after the fit, this share of its steps more "
                                        "takes the planes to the object alone, against their own views with the "
                                        "ground, the shadow and the haze cut away (train/field/object_carve.py; "
@@ -164,7 +164,7 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
     for option, value, allowed in (("ending", cfg.ending, ("auto", "plain")),
                                    ("background", cfg.background, ("auto", "white", "outer")),
                                    ("refine-poses", cfg.refine_poses, ("auto", "on", "off")),
-                                   ("bundle", cfg.bundle, ("box", "fit", "off")),
+                                   ("bundle", cfg.bundle, ("auto", "fit", "box", "off")),
                                    ("head", cfg.head, ("auto", "on", "off"))):
         if value not in allowed:
             problems.append(f"--{option} must be {', '.join(allowed[:-1])} or {allowed[-1]}, not {value!r}")
