@@ -1,9 +1,9 @@
 """The box of a capture without masks from its photos' sparse 3D points (numpy and OpenCV; fit --box auto with the
 background model): what COLMAP's sparse model holds, found here with the capture's own poses.
 
-SIFT features of each training frame are matched (ratio test) with those of its nearest cameras, triangulated, and
-kept where they reproject within `reproj_px` in both frames with at least `min_parallax_deg` between the rays.
-Under the cameras' look-at point, the plane that holds the most points in a band of `tolerance` is the ground
+SIFT features of each training frame are matched (ratio test) with those of its nearest cameras (with `bundle`, the
+poses are first adjusted to those matches, `snapshot3d/bundle.py`), triangulated, and kept where they reproject
+within `reproj_px` in both frames with at least `min_parallax_deg` between the rays. Under the cameras' look-at point, the plane that holds the most points in a band of `tolerance` is the ground
 (RANSAC, a fixed seed) if it lies within `max_tilt_deg` of horizontal; where poses a little off scatter the points,
 the band widens (`spread`). The points above it inside the first box, less the stray ones (`knn`), are the
 object's. The box is cut round them: their `quantile` and 1 - `quantile` on each axis, widened by `margin` of the
@@ -53,7 +53,8 @@ class SparseBoxConfig:
     #                                poses a little off scatter about the ground (0.5 deg: 17% within 1x of it)
     bundle: bool = True            # adjust the poses to the matches first (`snapshot3d.bundle`): poses a little off
     #                                scatter the points (0.5 deg: the teapot's box cut through it without)
-    scatter_trigger: float = 0.95  # the share of the points under the ground that must lie deeper than three bands
+    scatter_trigger: float = 0.95  # the rule below applies where this quantile of the points under the ground lies
+    #                                deeper than three bands (0.95: 5% of them)
     scatter_quantile: float = 0.99  # where 5% of the points under the ground lie deeper than the object's points
     #                                must rise, they must rise higher than this quantile of those depths
 
