@@ -2,14 +2,15 @@
 background model): what COLMAP's sparse model holds, found here with the capture's own poses.
 
 SIFT features of each training frame are matched (ratio test) with those of its nearest cameras (with `bundle`, the
-poses are first adjusted to those matches, `snapshot3d/bundle.py`), triangulated, and kept where they reproject
-within `reproj_px` in both frames with at least `min_parallax_deg` between the rays. Under the cameras' look-at point, the plane that holds the most points in a band of `tolerance` is the ground
-(RANSAC, a fixed seed) if it lies within `max_tilt_deg` of horizontal; where poses a little off scatter the points,
-the band widens (`spread`). The points above it inside the first box, less the stray ones (`knn`), are the
-object's. The box is cut round them: their `quantile` and 1 - `quantile` on each axis, widened by `margin` of the
-span and `pad` of the first box (the points miss the object's untextured parts), the floor `floor_lift` over the
-plane (a fit's ground is not thinner). None when the points do not show a ground with an object on it; the fit
-then finds them from a short fit's density (`train/field/box_tighten.py`).
+poses are first adjusted to those matches, `snapshot3d/bundle.py`), triangulated, and kept where they reproject within
+`reproj_px` in both frames with at least `min_parallax_deg` between the rays. Under the cameras' look-at point, the
+plane that holds the most points in a band of `tolerance` is the ground (RANSAC, a fixed seed) if it lies within
+`max_tilt_deg` of horizontal; where poses a little off scatter the points, the band widens (`spread`). The points
+above it inside the first box, less the stray ones (`knn`), are the object's. The box is cut round them: their
+`quantile` and 1 - `quantile` on each axis, widened by `margin` of the span and `pad` of the first box (the points
+miss the object's untextured parts), the floor `floor_lift` over the plane (a fit's ground is not thinner). None when
+the points do not show a ground with an object on it; the fit then finds them from a short fit's density
+(`train/field/box_tighten.py`).
 
 On the 128x96 composites of spot and duck (seeds 0-2), teapot, bunny and suzanne (0), 4,000 to 8,000 points a
 capture in about a second: the ground within 0.004 of the truth on all nine, and each box holds the object's true
