@@ -29,7 +29,8 @@ PLAIN = {"distortion_weight": 0.0, "opacity_weight": 0.0, "opacity_entropy": Fal
 _SIDES_WALLS = {**PLAIN, "tighten_sides": True, "wall_weight": 0.3}
 # mode: (file read, background, box, FitConfig fields over the bench's; poses as given unless the mode says
 # otherwise, so that the modes compare like with like); `outer` is --background outer with its
-# defaults, the other outer-* modes are the candidates against floaters (docs/capture.md), kept as rows
+# defaults, `outer-capture` what `fit` does with a capture by default (--refine-poses auto, --bundle auto), the
+# other outer-* modes are the candidates against floaters and pose noise (docs/capture.md), kept as rows
 MODES = {"white": ("transforms.json", "white", None, {}),
          "outer": ("transforms.json", "outer", "auto", {}),
          "outer-uncut": ("transforms.json", "outer", "auto", {"object_steps": 0.0}),
@@ -54,7 +55,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-nobundle-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "off"}),
          "outer-bundle-fit-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "fit"}),
          "outer-bundle-box-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "box"}),
-         "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"})}
+         "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"}),
+         "outer-capture": ("transforms.json", "outer", "auto", {"refine_poses": "auto"})}
 # `bench fit --captures` (issue 40 item 4): this bench with these settings
 CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size": 128, "views": 48, "steps": 150,
                     "occ_warmup": 32, "plane_res": 64, "plane_channels": 8, "seed": 0}

@@ -141,3 +141,28 @@ def test_poses_half_a_degree_off_are_adjusted_before_the_box_which_then_holds_th
     truth = np.array(json.loads((cap / "gt/truth.json").read_text())["box"])
     assert box is not None and np.all(box[0, :2] <= truth[0, :2]) and np.all(box[1] >= truth[1])
     assert abs(info["sparse_ground"] - truth[0, 2]) < 0.03 * (truth[1, 2] - truth[0, 2])
+
+
+def test_the_fit_starts_from_the_adjusted_poses_and_keeps_them_under_refine_poses_auto(capture):
+    """fit's box step on a nerfstudio capture with --refine-poses auto and --bundle auto: the training poses are
+    replaced by the adjusted ones, the held-out ones kept, and the planes do not refine them on; with --refine-poses
+    on given, they do."""
+    from dataclasses import replace
+
+    from snapshot3d.capture import CaptureOptions, with_overlap_box
+    from snapshot3d.loaders import load_scene
+    from snapshot3d.train.field.commands import _tightened, resolve_autos
+    from snapshot3d.train.field.config import FitConfig
+
+    posed = with_overlap_box(load_scene(str(capture / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0))))
+    assert posed.info["layout"] == "nerfstudio"
+    cfg = resolve_autos(FitConfig(background="outer", object_box=0.0), "nerfstudio", None)   # no fit may run
+    assert (cfg.refine_poses, cfg.bundle) == ("on", "fit")
+    out, info, kept = _tightened(posed, None, cfg, None, quiet=True, keep_adjusted=True)
+    assert kept.refine_poses == "off" and info["bundle"]["adjusted"]
+    assert not np.array_equal(out.c2w[out.train], posed.c2w[posed.train])
+    np.testing.assert_array_equal(out.c2w[out.test], posed.c2w[posed.test])
+    assert "keeps them" in out.info["capture"]["box_from"]
+    _, _, refined = _tightened(replace(posed, info={**posed.info, "capture": dict(posed.info["capture"])}), None, cfg,
+                               None, quiet=True, keep_adjusted=False)
+    assert refined.refine_poses == "on"

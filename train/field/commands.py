@@ -85,6 +85,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         cfg, chose = replace(cfg, background=mode), f"{mode} ({why})"
         if mode == "outer" and (capture is None or capture.box is None):
             posed = with_overlap_box(posed)
+    keep_adjusted = cfg.refine_poses == "auto"   # poses adjusted to the photos' matches are then not refined on
     cfg = resolve_autos(cfg, posed.info.get("layout"), medium)
     read = posed.info.get("capture")
     if read and not quiet:
@@ -105,7 +106,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     bars = None if quiet else _bar
     report = {"background_mode": chose} if chose and not spec.startswith("builtin:") else {}
     if cfg.background == "outer" and read and str(read.get("box_from", "")).startswith("auto"):
-        posed, report["background"] = _tightened(posed, decoder, cfg, device, quiet)
+        posed, report["background"], cfg = _tightened(posed, decoder, cfg, device, quiet, keep_adjusted)
     if budget == "auto":
         chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device, medium=medium,
                                    channel=channel)
@@ -149,9 +150,10 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     return scene, report, ev["renders"]
 
 
-def _tightened(posed, decoder, cfg, device, quiet: bool):
+def _tightened(posed, decoder, cfg, device, quiet: bool, keep_adjusted: bool = False):
     """`posed` in the automatic box tightened from a short fit's density (train/field/box_tighten.py), its
-    capture account updated; and what the tightening found."""
+    capture account updated; what the tightening found; and cfg, its pose refinement off where the training poses
+    were adjusted to the photos' matches and `keep_adjusted` (--refine-poses auto)."""
 
     from .box_tighten import object_box, tighten_box
     box, info, adjusted = tighten_box(posed, decoder, cfg, device)
@@ -159,6 +161,8 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
         c2w = posed.c2w.copy()
         c2w[posed.train] = adjusted
         posed = replace(posed, c2w=c2w)
+        if keep_adjusted:   # refined on by the planes they lost on 5 of 7 noisy composites (docs/capture.md)
+            cfg = replace(cfg, refine_poses="off")
     read = posed.info["capture"]
     ground = f", the ground at z = {info['ground_z']:.3g}" if info["ground_z"] is not None else ""
     ground += ", sides and top cut" if info.get("sides_cut") else ""
@@ -171,13 +175,14 @@ def _tightened(posed, decoder, cfg, device, quiet: bool):
               if info["box_from"] == "sparse points" else f"{info['prefit_steps']} steps' density")
     if adjusted is not None:
         source += (f", at the training poses adjusted to the photos' matches (median turn "
-                   f"{info['bundle']['median_turn_deg']:.2f} deg, the fit starts from them)")
+                   f"{info['bundle']['median_turn_deg']:.2f} deg; the fit starts from them"
+                   f"{' and keeps them' if cfg.refine_poses == 'off' else ' and refines them on'})")
     read.update(box=box.tolist(), box_from=read["box_from"] + f"; tightened from {source}{ground}")
     if not quiet:
         lo, hi = (", ".join(f"{float(x):.3g}" for x in corner) for corner in box)
         print(f"box ({lo})..({hi}) (tightened from {source}{ground}, "
               f"{info.get('sparse_seconds', 0) + info['prefit_seconds'] + info.get('object_box_seconds', 0):.0f} s)")
-    return replace(posed, box=box, info=info_ground), info
+    return replace(posed, box=box, info=info_ground), info, cfg
 
 
 def fit_command(args) -> int:

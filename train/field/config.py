@@ -86,8 +86,8 @@ class FitConfig:
     refine_poses: str = config_field("auto", "learn a small correction of each training view's pose with the "
                                      "planes (a rotation about the camera and a shift, train/field/pose_refine.py): "
                                      "on, off, or auto: on for nerfstudio and COLMAP captures (poses from a solver "
-                                     "or an app), off for builtin and Blender scenes (exact poses; a fit's core "
-                                     "treats auto as off)")
+                                     "or an app) unless --bundle adjusted them to the photos' matches first, off "
+                                     "for builtin and Blender scenes (exact poses; a fit's core treats auto as off)")
     pose_lr: float = config_field(1e-3, "with --refine-poses: the corrections' learning rate (decayed as the planes')")
     pose_start: float = config_field(0.1, "with --refine-poses: fraction of the steps before the corrections move (the "
                                      "planes first take a rough shape)")
@@ -101,7 +101,7 @@ class FitConfig:
     bundle: str = config_field("auto", "with --sparse-box: adjust the training poses to the photos' matched features "
                                "first (a small bundle adjustment, snapshot3d/bundle.py): fit: the box is cut from "
                                "the points at the adjusted poses and the fit starts from them; box: the box only; "
-                               "off; auto: fit where the poses are refined (--refine-poses), else off")
+                               "off; auto: fit for nerfstudio and COLMAP captures, or with --refine-poses on, else off")
     object_steps: float = config_field(0.5, "with --background outer: after the fit, this share of its steps more "
                                        "takes the planes to the object alone, against their own views with the "
                                        "ground, the shadow and the haze cut away (train/field/object_carve.py; "
