@@ -58,10 +58,10 @@ def tracks(matches: list, counts: list[int]) -> tuple[np.ndarray, np.ndarray, np
     size = np.bincount(label)
     keep = size[label] >= 2
     # a track with one frame twice is a mismatch somewhere along it
-    frames_in = np.bincount(label[keep], minlength=len(size))
-    distinct = np.zeros(len(size), int)
-    np.add.at(distinct, np.unique(label[keep] * len(counts) + frame_of[keep]) // len(counts), 1)
-    good = keep & (distinct[label] == frames_in[label])
+    pair, seen = np.unique(label[keep] * len(counts) + frame_of[keep], return_counts=True)
+    twice = np.zeros(len(size), bool)
+    twice[pair[seen > 1] // len(counts)] = True
+    good = keep & ~twice[label]
     feature = np.nonzero(good)[0]
     _, track = np.unique(label[feature], return_inverse=True)
     order = np.argsort(track, kind="stable")
@@ -103,7 +103,7 @@ def adjust_poses(c2w: np.ndarray, intrinsics: np.ndarray, track: np.ndarray, fra
     if m < cfg.min_tracks:
         return c2w, {"tracks": m, "adjusted": False}
     w2c = OPENCV_TO_OPENGL @ np.linalg.inv(c2w)   # the flip is its own inverse
-    points = triangulate(track, pixels, np.stack([projection(c2w[f], intrinsics[f]) for f in range(n)])[frame])
+    points = triangulate(track, pixels, _projections(c2w, intrinsics)[frame])
     dist = float(np.median(np.linalg.norm(c2w[:, :3, 3] - points.mean(0), axis=1)))
     weight = cfg.prior_px * float(np.median(intrinsics[:, 0]))
     intr = np.asarray(intrinsics, np.float64)[frame]
@@ -114,14 +114,11 @@ def adjust_poses(c2w: np.ndarray, intrinsics: np.ndarray, track: np.ndarray, fra
         if k and len(kept) < cfg.min_tracks:
             break
         pose, err = _adjust(w2c, weight, dist, intr[keep], sub, frame[keep], pixels[keep], points[kept], cfg)
-        first, used = err if first is None else first, len(kept)
-        bad = np.zeros(m, bool)   # a track with any observation off, triangulated again at the adjusted poses
-        bad[track[_reprojection(_moved(w2c, pose), intrinsics, track, frame, pixels) > cfg.trim_px]] = True
-        keep &= ~bad[track]
-    rot, shift = _moved(w2c, pose)
-    out = np.tile(np.eye(4), (n, 1, 1))
-    out[:, :3, :3], out[:, :3, 3] = rot, shift
-    out = np.linalg.inv(OPENCV_TO_OPENGL @ out)
+        first, used, out = err if first is None else first, len(kept), _c2w(w2c, pose)
+        if k + 1 < cfg.passes:   # a track with any observation off, triangulated again at the adjusted poses
+            bad = np.zeros(m, bool)
+            bad[track[_reprojection(out, intrinsics, track, frame, pixels) > cfg.trim_px]] = True
+            keep &= ~bad[track]
     return out, {"tracks": m, "observations": len(track), "adjusted": True,
                  "tracks_last_pass": used,
                  "median_error_px": [round(float(np.median(first[0])), 3), round(float(np.median(err[1])), 3)],
@@ -129,18 +126,26 @@ def adjust_poses(c2w: np.ndarray, intrinsics: np.ndarray, track: np.ndarray, fra
                  "median_shift": round(float(np.median(np.linalg.norm(out[:, :3, 3] - c2w[:, :3, 3], axis=1))), 4)}
 
 
-def _reprojection(moved: tuple, intrinsics: np.ndarray, track: np.ndarray, frame: np.ndarray,
+def _projections(c2w: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) OpenGL camera-to-world and (n, 4) intrinsics -> (n, 3, 4) `projection` matrices."""
+    return np.stack([projection(c, k) for c, k in zip(c2w, intrinsics)])
+
+
+def _reprojection(c2w: np.ndarray, intrinsics: np.ndarray, track: np.ndarray, frame: np.ndarray,
                   pixels: np.ndarray) -> np.ndarray:
-    """((n, 3, 3) rotations, (n, 3) shifts) of world-to-camera, intrinsics (n, 4), observations -> (O,) pixels
-    between each observation and its track's DLT point (`triangulate`) projected."""
-    rot, shift = moved
-    fx, fy, cx, cy = np.asarray(intrinsics, np.float64).T
-    k = np.zeros((len(rot), 3, 3))
-    k[:, 0, 0], k[:, 1, 1], k[:, 0, 2], k[:, 1, 2], k[:, 2, 2] = fx, fy, cx, cy, 1.0
-    proj = (k @ np.concatenate([rot, shift[:, :, None]], axis=2))[frame]
+    """(n, 4, 4) OpenGL camera-to-world, intrinsics (n, 4), observations -> (O,) pixels between each observation and
+    its track's DLT point (`triangulate`) projected."""
+    proj = _projections(c2w, intrinsics)[frame]
     points = triangulate(track, pixels, proj)
     q = np.einsum("oij,oj->oi", proj, np.c_[points[track], np.ones(len(track))])
     return np.linalg.norm(q[:, :2] / np.where(np.abs(q[:, 2:]) > 1e-12, q[:, 2:], 1e-12) - pixels, axis=1)
+
+
+def _c2w(w2c: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) OpenCV world-to-camera moved by (n, 6) turns and shifts -> (n, 4, 4) OpenGL camera-to-world."""
+    out = np.tile(np.eye(4), (len(w2c), 1, 1))
+    out[:, :3, :3], out[:, :3, 3] = _moved(w2c, pose)
+    return np.linalg.inv(OPENCV_TO_OPENGL @ out)
 
 
 def _moved(w2c: np.ndarray, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
