@@ -34,6 +34,7 @@ _SIDES_WALLS = {**PLAIN, "tighten_sides": True, "wall_weight": 0.3}
 MODES = {"white": ("transforms.json", "white", None, {}),
          "outer": ("transforms.json", "outer", "auto", {}),
          "outer-uncut": ("transforms.json", "outer", "auto", {"object_steps": 0.0}),
+         "outer-nosilhouette": ("transforms.json", "outer", "auto", {"object_silhouette": 1.0}),
          "outer-density": ("transforms.json", "outer", "auto", {"sparse_box": False}),
          "outer-nobox": ("transforms.json", "outer", "auto", {"object_box": 0.0}),
          "outer-plain": ("transforms.json", "outer", "auto", PLAIN),

@@ -110,6 +110,11 @@ class FitConfig:
                                      "share of the steps in the tightened box finds the object's cells "
                                      "(object_carve.object_cells), and the planes are fitted in the box round them "
                                      "(train/field/box_tighten.py: more texels on the object); 0: off")
+    object_silhouette: float = config_field(0.2, "with --object-steps: the object's cells that fall outside the "
+                                            "object's silhouette in more than this share of the training photos "
+                                            "that see them are cut too (each photo cut by GrabCut from the planes' "
+                                            "own view, train/field/silhouette.py: the ground-coloured skirt under "
+                                            "the object); 1: off")
 
 
 @dataclass
@@ -152,6 +157,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("ground-texture", 0 <= cfg.ground_texture <= 1024, "in 0..1024"),
         ("object-steps", 0 <= cfg.object_steps <= 4, "in [0, 4]"),
         ("object-box", 0 <= cfg.object_box <= 1, "in [0, 1]"),
+        ("object-silhouette", 0 <= cfg.object_silhouette <= 1, "in [0, 1]"),
         ("wall-margin", 0 < cfg.wall_margin <= 0.25, "in (0, 0.25]"),
     ]
 

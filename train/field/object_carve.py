@@ -151,12 +151,13 @@ def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray
     return out
 
 
-def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None):
+def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None, silhouette: float = 1.0):
     """planes (3, C, R, R) torch, fitted with the background model over posed.box; poses: the fit's pose corrections
     (V, 6) of posed.train, or None -> (the views to fit the object alone to: posed's training views at those poses,
     rendered with the object's cells only over white, at most TEACHER_SIZE pixels on the longer side, their colour
     the photos' where they are opaque (`photo_colours`), as a PosedImages; the object's cells (G, G, G) bool torch,
-    their hull), or None when no cell is solid."""
+    their hull), or None when no cell is solid. With `silhouette` under 1, the object's cells that fall outside the
+    photos' silhouettes in more than that share of the views (`silhouette.py`) are cut first."""
     import cv2
     import torch
 
@@ -169,19 +170,39 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     if not bool(keep.any()):
         return None
     frame = BoxFrame.from_box(box, planes.device)
-    occ = occupancy_from_planes(planes, decoder, frame) & keep
+    occ = occupancy_from_planes(planes, decoder, frame)
     tr = posed.train
     c2w = posed.c2w[tr] if poses is None else refined_c2w(posed.c2w[tr], poses, frame.scale)
     scale = min(1.0, TEACHER_SIZE / max(posed.width, posed.height))
     w, h = max(1, round(posed.width * scale)), max(1, round(posed.height * scale))
     intrinsics = (posed.intrinsics[tr] * np.float32(scale)).astype(np.float32)
-    views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ, with_opacity=True)
+    views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     photos = posed.images[tr] if (w, h) == (posed.width, posed.height) else \
         np.stack([cv2.resize(p, (w, h), interpolation=cv2.INTER_AREA) for p in posed.images[tr]])
+    if silhouette < 1:
+        keep &= _inside_silhouettes(photos, np.clip(cover, 0.0, 1.0), c2w, intrinsics, box, silhouette).to(keep.device)
+        if not bool(keep.any()):
+            return None
+        views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     cover = np.clip(cover, 0.0, 1.0)
     return PosedImages(images=photo_colours(views, cover, photos), alpha=cover, c2w=c2w,
                        intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
                        name=posed.name), keep
+
+
+def _inside_silhouettes(photos, cover, c2w, intrinsics, box, share: float):
+    """(G, G, G) bool torch: the cells of `box` whose centres fall outside the photos' silhouettes (GrabCut started
+    from the views' opacity `cover`) in at most `share` of the views that see them."""
+    import torch
+
+    from snapshot3d.carve import grid_centres
+
+    from .silhouette import outside_share, photo_silhouettes
+
+    g = formats.OCC_RES
+    masks = photo_silhouettes(photos, cover)
+    out = outside_share(grid_centres(np.asarray(box, np.float64), g).reshape(-1, 3), c2w, intrinsics, masks)
+    return torch.from_numpy((out <= share).reshape(g, g, g))
 
 
 def object_config(cfg):
