@@ -157,7 +157,7 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     rendered with the object's cells only over white, at most TEACHER_SIZE pixels on the longer side, their colour
     the photos' where they are opaque (`photo_colours`), as a PosedImages; the object's cells (G, G, G) bool torch,
     their hull), or None when no cell is solid. With `silhouette` under 1, the object's cells that fall outside the
-    photos' silhouettes in more than that share of the views (`silhouette.py`) are cut first."""
+    photos' silhouettes in more than that share of the views (`silhouette.py`) are cut first, in the floor band."""
     import cv2
     import torch
 
@@ -181,8 +181,6 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
         np.stack([cv2.resize(p, (w, h), interpolation=cv2.INTER_AREA) for p in posed.images[tr]])
     if silhouette < 1:
         keep &= _inside_silhouettes(photos, np.clip(cover, 0.0, 1.0), c2w, intrinsics, box, silhouette).to(keep.device)
-        if not bool(keep.any()):
-            return None
         views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     cover = np.clip(cover, 0.0, 1.0)
     return PosedImages(images=photo_colours(views, cover, photos), alpha=cover, c2w=c2w,
@@ -191,8 +189,10 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
 
 
 def _inside_silhouettes(photos, cover, c2w, intrinsics, box, share: float):
-    """(G, G, G) bool torch: the cells of `box` whose centres fall outside the photos' silhouettes (GrabCut started
-    from the views' opacity `cover`) in at most `share` of the views that see them."""
+    """(G, G, G) bool torch: the cells of `box` over the floor band, and those in it whose centres fall outside the
+    photos' silhouettes (GrabCut started from the views' opacity `cover`) in at most `share` of the views that see
+    them. The band is where the ground's shadow is painted; over it, what the cut misses is the object's own (a
+    grey teapot's spout and handle on a grey ground, spot's horns: -3.1 and -1.2 dB when cut at every height)."""
     import torch
 
     from snapshot3d.carve import grid_centres
@@ -200,9 +200,12 @@ def _inside_silhouettes(photos, cover, c2w, intrinsics, box, share: float):
     from .silhouette import outside_share, photo_silhouettes
 
     g = formats.OCC_RES
+    band = math.ceil(FLOOR_BAND * g)
     masks = photo_silhouettes(photos, cover)
-    out = outside_share(grid_centres(np.asarray(box, np.float64), g).reshape(-1, 3), c2w, intrinsics, masks)
-    return torch.from_numpy((out <= share).reshape(g, g, g))
+    centres = grid_centres(np.asarray(box, np.float64), g)[:, :, :band].reshape(-1, 3)
+    inside = np.ones((g, g, g), bool)
+    inside[:, :, :band] = (outside_share(centres, c2w, intrinsics, masks) <= share).reshape(g, g, band)
+    return torch.from_numpy(inside)
 
 
 def object_config(cfg):

@@ -11,19 +11,21 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["photo_silhouettes", "outside_share", "GROW", "BAND", "ITERATIONS"]
+__all__ = ["photo_silhouettes", "outside_share", "GROW", "BAND", "ITERATIONS", "OPAQUE", "TOUCHED", "FAILED"]
 
 GROW = 0.025       # of the view's longer side: the cut is grown by this before the cells are judged (3 px at 128)
 BAND = 0.035       # of the longer side: round the planes' opacity, what GrabCut may give to either side (4 px at 128)
 ITERATIONS = 5     # GrabCut's
 OPAQUE = 0.5       # the planes' opacity from which a pixel is probably the object's
 TOUCHED = 0.02     # ... and under which, farther than BAND from it, it is the background's for certain
+FAILED = 0.5       # a cut that keeps less than this share of the opaque pixels failed (the photo does not show what
+#                    the planes do: a grey teapot's view, 0.22; the others 0.91 to 1), and its view does not vote
 
 
 def photo_silhouettes(photos: np.ndarray, cover: np.ndarray) -> list:
     """photos (N, H, W, 3) RGB in [0, 1], cover (N, H, W) the planes' opacity in the same views -> N masks (H, W) bool
     of the object as GrabCut cuts each photo, grown by GROW of the longer side; None for a view that holds no
-    opaque pixel or no background to learn from."""
+    opaque pixel or no background to learn from, or whose cut keeps less than FAILED of its opaque pixels."""
     import cv2
 
     h, w = cover.shape[1:]
@@ -40,8 +42,9 @@ def photo_silhouettes(photos: np.ndarray, cover: np.ndarray) -> list:
             continue
         bgr = np.ascontiguousarray((np.clip(photo, 0, 1) * 255 + 0.5).astype(np.uint8)[..., ::-1])
         cv2.grabCut(bgr, init, None, np.zeros((1, 65)), np.zeros((1, 65)), ITERATIONS, cv2.GC_INIT_WITH_MASK)
-        cut = ((init == cv2.GC_FGD) | (init == cv2.GC_PR_FGD)).astype(np.uint8)
-        out.append(cv2.dilate(cut, grow_kernel) > 0)
+        opaque = acc > OPAQUE
+        cut = (init == cv2.GC_FGD) | (init == cv2.GC_PR_FGD)
+        out.append(cv2.dilate(cut.astype(np.uint8), grow_kernel) > 0 if cut[opaque].mean() >= FAILED else None)
     return out
 
 
