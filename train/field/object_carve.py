@@ -10,7 +10,9 @@ sideways in the ABOVE layers just over the band: a leg or a body resting on the 
 texture and the object's shadow round it do not), unless, given the cells' colours, they widen a base down
 the band in the lower body's colour rather than the ground's (`_widened_base`: the bunny's haunches); of those,
 the connected pieces at least KEEP_SHARE of the largest's size; then grown by NEAR cells, so that the object's
-soft edge stays, but not into the floor band beyond what stands there. `object_views` renders the training
+soft edge stays, but not into the floor band beyond what stands there. Of those, the floor band's cells outside
+the photos' silhouettes in too many views go too (`silhouette.py`, cfg.object_silhouette: the skirt of shadow
+under a belly, which stands under the object's own cells). `object_views` renders the training
 views of the fitted planes with every other cell skipped, over white, at the poses the fit refined; where a view is
 opaque its colour is the photo's (`photo_colours`): the planes of a fit with the ground in the box paint the ground's
 texture into the object's colour too (the plane over the floor is shared by every height), which the photo does not
