@@ -113,3 +113,14 @@ def test_the_object_alone_step_cuts_a_skirt_under_the_belly_the_photos_do_not_sh
     # photos of the ground alone: every cut fails (keeps less than half the opaque pixels), and no view votes
     _, none_seen = object_views(planes, decoder, replace(posed, images=ground.astype(np.float32)), silhouette=0.2)
     assert torch.equal(none_seen, kept)
+
+
+def test_the_silhouette_share_is_checked_in_one_line():
+    import pytest
+
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.field.config import FitConfig, check_fit_config
+
+    with pytest.raises(UserError, match="--object-silhouette must be in"):
+        check_fit_config(FitConfig(background="outer", object_silhouette=1.5))
+    assert check_fit_config(FitConfig(background="outer", object_silhouette=1.0)).object_silhouette == 1.0
