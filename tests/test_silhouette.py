@@ -4,10 +4,13 @@ outside the silhouettes, and the object-alone step cuts a fin of ground-coloured
 show."""
 import cv2
 import numpy as np
+import pytest
 import torch
 
 from snapshot3d.bundle import projection
 from snapshot3d.cameras import orbit_poses
+from snapshot3d.errors import UserError
+from snapshot3d.train.field.config import FitConfig, check_fit_config
 from snapshot3d.train.field.silhouette import outside_share, photo_silhouettes
 
 
@@ -116,11 +119,6 @@ def test_the_object_alone_step_cuts_a_skirt_under_the_belly_the_photos_do_not_sh
 
 
 def test_the_silhouette_share_is_checked_in_one_line():
-    import pytest
-
-    from snapshot3d.errors import UserError
-    from snapshot3d.train.field.config import FitConfig, check_fit_config
-
     with pytest.raises(UserError, match="--object-silhouette must be in"):
         check_fit_config(FitConfig(background="outer", object_silhouette=1.5))
     assert check_fit_config(FitConfig(background="outer", object_silhouette=1.0)).object_silhouette == 1.0
