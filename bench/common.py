@@ -38,7 +38,8 @@ def write_rows(path: Path, rows: list[dict], fields: list[str] | None = None) ->
 def run_metadata() -> dict:
     """What every results JSON records about the run that wrote it (its "meta" entry): the UTC date and
     time, the commit (`git rev-parse --short HEAD`, with "+dirty" when the tree has changes; "unknown"
-    outside a git checkout), os.cpu_count(), the platform, and the versions of python, numpy, opencv,
+    outside a git checkout), os.cpu_count(), the platform, the CPU's model (with torch's kernels when this run
+    imported torch), and the versions of python, numpy, opencv,
     onnxruntime and torch (torch only when this run imported it; "not installed" when absent)."""
     import datetime
     import platform
@@ -64,11 +65,23 @@ def run_metadata() -> dict:
         commit += "+dirty"
     versions = {"python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
                 "onnxruntime": version("onnxruntime")}
+    cpu = _cpu_model() or platform.processor() or "unknown"
     if "torch" in sys.modules:
         versions["torch"] = sys.modules["torch"].__version__
+        cpu += f" ({sys.modules['torch'].backends.cpu.get_cpu_capability()})"   # the kernels torch's fits ran
     return {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-            "commit": commit or "unknown", "cores": os.cpu_count(), "machine": platform.platform(),
+            "commit": commit or "unknown", "cores": os.cpu_count(), "machine": platform.platform(), "cpu": cpu,
             "versions": versions}
+
+
+def _cpu_model() -> str | None:
+    """The CPU's model name from /proc/cpuinfo (None elsewhere). Fits of the same commit and seed on two CPUs can
+    differ by about a dB (their float kernels round differently and a fit amplifies it; docs/capture.md)."""
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        return None
+    return next((line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")), None)
 
 
 def write_report(out: Path, stem: str, rows: list[dict], doc: dict) -> dict:

@@ -32,7 +32,8 @@ def test_run_metadata_has_every_field():
     from snapshot3d.bench.common import run_metadata
 
     meta = run_metadata()
-    assert {"date", "commit", "cores", "versions"} <= set(meta)
+    assert {"date", "commit", "cores", "cpu", "versions"} <= set(meta)
+    assert isinstance(meta["cpu"], str) and meta["cpu"], meta["cpu"]
     assert {"python", "numpy", "opencv", "onnxruntime"} <= set(meta["versions"])
 
 

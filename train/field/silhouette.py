@@ -42,6 +42,7 @@ def photo_silhouettes(photos: np.ndarray, cover: np.ndarray) -> list:
             out.append(None)
             continue
         bgr = np.ascontiguousarray((np.clip(photo, 0, 1) * 255 + 0.5).astype(np.uint8)[..., ::-1])
+        cv2.setRNGSeed(0)   # GrabCut's k-means draws from OpenCV's global generator: the same cut whatever ran before
         cv2.grabCut(bgr, init, None, np.zeros((1, 65)), np.zeros((1, 65)), ITERATIONS, cv2.GC_INIT_WITH_MASK)
         opaque = acc > OPAQUE
         cut = (init == cv2.GC_FGD) | (init == cv2.GC_PR_FGD)
