@@ -36,6 +36,7 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-uncut": ("transforms.json", "outer", "auto", {"object_steps": 0.0}),
          "outer-nosilhouette": ("transforms.json", "outer", "auto", {"object_silhouette": 1.0}),
          "outer-silhouette-0.3": ("transforms.json", "outer", "auto", {"object_silhouette": 0.3}),
+         "outer-nobasekeep": ("transforms.json", "outer", "auto", {"object_base_keep": 0.0}),
          "outer-density": ("transforms.json", "outer", "auto", {"sparse_box": False}),
          "outer-nobox": ("transforms.json", "outer", "auto", {"object_box": 0.0}),
          "outer-plain": ("transforms.json", "outer", "auto", PLAIN),
@@ -58,7 +59,9 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-bundle-fit-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "fit"}),
          "outer-bundle-box-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "box"}),
          "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"}),
-         "outer-capture": ("transforms.json", "outer", "auto", {"refine_poses": "auto"})}
+         "outer-capture": ("transforms.json", "outer", "auto", {"refine_poses": "auto"}),
+         "outer-capture-nobasekeep": ("transforms.json", "outer", "auto", {"refine_poses": "auto",
+                                                                            "object_base_keep": 0.0})}
 # `bench fit --captures` (issue 40 item 4): this bench with these settings
 CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size": 128, "views": 48, "steps": 150,
                     "occ_warmup": 32, "plane_res": 64, "plane_channels": 8, "seed": 0}

@@ -122,3 +122,29 @@ def test_the_silhouette_share_is_checked_in_one_line():
     with pytest.raises(UserError, match="--object-silhouette must be in"):
         check_fit_config(FitConfig(background="outer", object_silhouette=1.5))
     assert check_fit_config(FitConfig(background="outer", object_silhouette=1.0)).object_silhouette == 1.0
+
+
+def test_the_band_vote_cuts_a_skirt_and_keeps_back_a_broad_base_the_photos_hold():
+    """In the floor band (the lowest 2 of 6 layers): a kept cell outside the silhouettes in 30% of its views is cut,
+    one outside in 10% stays; a base cell the band's rule dropped comes back only with --object-base-keep over 0
+    and only where it is outside in fewer than that share of its views; nothing over the band changes."""
+    from snapshot3d.train.field.object_carve import band_vote
+
+    cells = np.zeros((4, 4, 6), bool)
+    cells[1, 1, :] = cells[2, 2, 0] = cells[3, 3, 0] = True
+    loose = cells.copy()
+    loose[0, 0, :2] = loose[0, 1, 0] = True          # a broad base the band's rule dropped
+    outside = np.zeros((4, 4, 2))
+    outside[2, 2, 0], outside[3, 3, 0] = 0.3, 0.1    # a skirt, and a cell the photos mostly hold
+    outside[0, 1, 0] = 0.1                           # a base cell the photos hold less often
+    got = band_vote(cells, loose, outside, 0.2, 0.0)
+    assert not got[2, 2, 0] and got[3, 3, 0] and got[1, 1].all() and not got[0].any()
+    assert np.array_equal(band_vote(cells, None, outside, 0.2, 0.05), got)
+    back = band_vote(cells, loose, outside, 0.2, 0.05)
+    assert back[0, 0, :2].all() and not back[0, 1, 0] and np.array_equal(back[1:], got[1:])
+    assert np.array_equal(back[:, :, 2:], cells[:, :, 2:])
+
+
+def test_the_base_keep_option_is_checked():
+    with pytest.raises(UserError, match="--object-base-keep must be in"):
+        check_fit_config(FitConfig(object_base_keep=1.5))

@@ -115,6 +115,10 @@ class FitConfig:
                                             "that see them are cut too (each photo cut by GrabCut from the planes' "
                                             "own view, train/field/silhouette.py: the ground-coloured skirt under "
                                             "the object); 1: off")
+    object_base_keep: float = config_field(0.05, "with --object-silhouette under 1: the floor band's solid cells that "
+                                           "its rule drops (nothing standing over them: a broad base on the "
+                                           "ground) are kept when they fall outside the photos' silhouettes in "
+                                           "fewer than this share of the views that see them; 0: off")
 
 
 @dataclass
@@ -158,6 +162,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("object-steps", 0 <= cfg.object_steps <= 4, "in [0, 4]"),
         ("object-box", 0 <= cfg.object_box <= 1, "in [0, 1]"),
         ("object-silhouette", 0 <= cfg.object_silhouette <= 1, "in [0, 1]"),
+        ("object-base-keep", 0 <= cfg.object_base_keep <= 1, "in [0, 1]"),
         ("wall-margin", 0 < cfg.wall_margin <= 0.25, "in (0, 0.25]"),
     ]
 

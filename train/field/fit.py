@@ -283,7 +283,8 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
         from .object_carve import object_config, object_views
         poses = None if st.poses is None else st.poses.params.detach().cpu().numpy()
         now = decoder if st.head is None else st.head
-        target = object_views(st.planes.planes.detach(), now, posed, poses, cfg.object_silhouette)
+        target = object_views(st.planes.planes.detach(), now, posed, poses, cfg.object_silhouette,
+                              cfg.object_base_keep)
         if target is not None:
             sub = object_config(cfg)
             alone = fit(target[0], now, sub, init_planes=st.planes.planes.detach(), hull=target[1],

@@ -32,8 +32,8 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.posed import PosedImages
 
-__all__ = ["object_cells", "object_views", "object_config", "photo_colours", "refined_c2w", "PHOTO_RAMP", "SOLID",
-           "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
+__all__ = ["object_cells", "object_views", "band_vote", "object_config", "photo_colours", "refined_c2w",
+           "PHOTO_RAMP", "SOLID", "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
            "TEACHER_SIZE", "DISTIL_LR", "STEP_DOWN", "KNN", "GROUND_LAYERS",
            "FOOTPRINT", "SEPARATE"]
 
@@ -153,13 +153,16 @@ def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray
     return out
 
 
-def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None, silhouette: float = 1.0):
+def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None, silhouette: float = 1.0,
+                 base_keep: float = 0.0):
     """planes (3, C, R, R) torch, fitted with the background model over posed.box; poses: the fit's pose corrections
     (V, 6) of posed.train, or None -> (the views to fit the object alone to: posed's training views at those poses,
     rendered with the object's cells only over white, at most TEACHER_SIZE pixels on the longer side, their colour
     the photos' where they are opaque (`photo_colours`), as a PosedImages; the object's cells (G, G, G) bool torch,
     their hull), or None when no cell is solid. With `silhouette` under 1, the object's cells that fall outside the
-    photos' silhouettes in more than that share of the views (`silhouette.py`) are cut first, in the floor band."""
+    photos' silhouettes in more than that share of the views (`silhouette.py`) are cut first, in the floor band; and
+    with `base_keep` over 0, the floor band's solid cells that its rule drops are kept where they fall outside the
+    silhouettes in fewer than that share of the views (a broad base: the bunny's)."""
     import cv2
     import torch
 
@@ -167,8 +170,9 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     from .sampler import BoxFrame
 
     box = np.asarray(posed.box, np.float32)
-    keep = torch.from_numpy(object_cells(*cell_alpha(planes, decoder, box, formats.OCC_RES, with_rgb=True)))
-    keep = keep.to(planes.device)
+    alpha, rgb = cell_alpha(planes, decoder, box, formats.OCC_RES, with_rgb=True)
+    cells = object_cells(alpha, rgb)
+    keep = torch.from_numpy(cells).to(planes.device)
     if not bool(keep.any()):
         return None
     frame = BoxFrame.from_box(box, planes.device)
@@ -182,7 +186,10 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     photos = posed.images[tr] if (w, h) == (posed.width, posed.height) else \
         np.stack([cv2.resize(p, (w, h), interpolation=cv2.INTER_AREA) for p in posed.images[tr]])
     if silhouette < 1:
-        keep &= _inside_silhouettes(photos, np.clip(cover, 0.0, 1.0), c2w, intrinsics, box, silhouette).to(keep.device)
+        loose = object_cells(alpha, rgb, floor_band=0.0) if base_keep > 0 else None
+        cells = _by_silhouettes(cells, loose, photos, np.clip(cover, 0.0, 1.0), c2w, intrinsics, box, silhouette,
+                                base_keep)
+        keep = torch.from_numpy(cells).to(keep.device)
         views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     cover = np.clip(cover, 0.0, 1.0)
     return PosedImages(images=photo_colours(views, cover, photos), alpha=cover, c2w=c2w,
@@ -190,13 +197,15 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
                        name=posed.name), keep
 
 
-def _inside_silhouettes(photos, cover, c2w, intrinsics, box, share: float):
-    """(G, G, G) bool torch: the cells of `box` over the floor band, and those in it whose centres fall outside the
-    photos' silhouettes (GrabCut started from the views' opacity `cover`) in at most `share` of the views that see
-    them. The band is where the ground's shadow is painted; over it, what the cut misses is the object's own (a
-    grey teapot's spout and handle on a grey ground, spot's horns: -3.1 and -1.2 dB when cut at every height)."""
-    import torch
-
+def _by_silhouettes(cells, loose, photos, cover, c2w, intrinsics, box, share: float, base_keep: float):
+    """The object's cells (G, G, G) bool after the photos' silhouettes (GrabCut started from the views' opacity
+    `cover`): over the floor band as they are; in it, those that fall outside the silhouettes in at most `share` of
+    the views that see them, and those of `loose` (the cells without the band's rule, or None) that fall outside in
+    fewer than `base_keep` of them. The band is where the ground's shadow is painted; over it, what the cut misses is
+    the object's own (a grey teapot's spout and handle on a grey ground, spot's horns: -3.1 and -1.2 dB when cut at
+    every height). A base that meets the ground along its whole outline (the bunny's) stands on no solid cell over
+    the band's top, so the band's rule drops it; the photos hold it in nearly every view, where a shadow under a
+    belly falls outside the cut in side views."""
     from snapshot3d.carve import grid_centres
 
     from .silhouette import outside_share, photo_silhouettes
@@ -205,9 +214,22 @@ def _inside_silhouettes(photos, cover, c2w, intrinsics, box, share: float):
     band = math.ceil(FLOOR_BAND * g)
     masks = photo_silhouettes(photos, cover)
     centres = grid_centres(np.asarray(box, np.float64), g)[:, :, :band].reshape(-1, 3)
-    inside = np.ones((g, g, g), bool)
-    inside[:, :, :band] = (outside_share(centres, c2w, intrinsics, masks) <= share).reshape(g, g, band)
-    return torch.from_numpy(inside)
+    return band_vote(cells, loose, outside_share(centres, c2w, intrinsics, masks).reshape(g, g, band), share,
+                     base_keep)
+
+
+def band_vote(cells: np.ndarray, loose: np.ndarray | None, outside: np.ndarray, share: float,
+              base_keep: float) -> np.ndarray:
+    """cells, loose (G, G, G) bool (loose: the cells without the floor band's rule, or None) and outside (G, G, B)
+    the share of the views that see each of the lowest B cells (the floor band) in which it falls outside the
+    photos' silhouettes -> (G, G, G) bool: `cells` over the band; in it, those outside in at most `share` of their
+    views, and those of `loose` alone outside in fewer than `base_keep`."""
+    band = outside.shape[2]
+    out = cells.copy()
+    out[:, :, :band] &= outside <= share
+    if loose is not None:
+        out[:, :, :band] |= loose[:, :, :band] & ~cells[:, :, :band] & (outside < base_keep)
+    return out
 
 
 def object_config(cfg):
