@@ -25,7 +25,7 @@ __all__ = ["MODES", "fit_and_score", "bench_capture_background_command", "bench_
 
 # the background model's regularisers, all off: --background outer as first landed
 PLAIN = {"distortion_weight": 0.0, "opacity_weight": 0.0, "opacity_entropy": False, "wall_weight": 0.0,
-         "floor_weight": 0.0, "tighten_sides": False}
+         "floor_weight": 0.0, "tighten_sides": False, "ground_texture": 0}
 _SIDES_WALLS = {**PLAIN, "tighten_sides": True, "wall_weight": 0.3}
 # mode: (file read, background, box, FitConfig fields over the bench's; poses as given unless the mode says
 # otherwise, so that the modes compare like with like); `outer` is --background outer with its
@@ -37,6 +37,7 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-nosilhouette": ("transforms.json", "outer", "auto", {"object_silhouette": 1.0}),
          "outer-silhouette-0.3": ("transforms.json", "outer", "auto", {"object_silhouette": 0.3}),
          "outer-nobasekeep": ("transforms.json", "outer", "auto", {"object_base_keep": 0.0}),
+         "outer-noground": ("transforms.json", "outer", "auto", {"ground_texture": 0}),
          "outer-density": ("transforms.json", "outer", "auto", {"sparse_box": False}),
          "outer-nobox": ("transforms.json", "outer", "auto", {"object_box": 0.0}),
          "outer-plain": ("transforms.json", "outer", "auto", PLAIN),
@@ -48,7 +49,7 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-sides": ("transforms.json", "outer", "auto", {**PLAIN, "tighten_sides": True}),
          "outer-sides-walls": ("transforms.json", "outer", "auto", _SIDES_WALLS),
          "outer-sides-walls-floor": ("transforms.json", "outer", "auto", {**_SIDES_WALLS, "floor_weight": 1.0}),
-         "outer-ground": ("transforms.json", "outer", "auto", {"ground_texture": 128}),
+         "outer-ground": ("transforms.json", "outer", "auto", {"ground_texture": 128, "ground_depth": 0.0}),
          "outer-ground-low": ("transforms.json", "outer", "auto", {"ground_texture": 128, "ground_depth": 0.05}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
@@ -61,7 +62,9 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"}),
          "outer-capture": ("transforms.json", "outer", "auto", {"refine_poses": "auto"}),
          "outer-capture-nobasekeep": ("transforms.json", "outer", "auto", {"refine_poses": "auto",
-                                                                            "object_base_keep": 0.0})}
+                                                                            "object_base_keep": 0.0}),
+         "outer-capture-noground": ("transforms.json", "outer", "auto", {"refine_poses": "auto",
+                                                                         "ground_texture": 0})}
 # `bench fit --captures` (issue 40 item 4): this bench with these settings
 CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size": 128, "views": 48, "steps": 150,
                     "occ_warmup": 32, "plane_res": 64, "plane_channels": 8, "seed": 0}

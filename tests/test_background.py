@@ -234,8 +234,37 @@ def test_negative_regulariser_weights_are_refused_in_one_line():
     from snapshot3d.train.field.config import FitConfig, check_fit_config
     with pytest.raises(UserError, match=r"^--distortion-weight must be >= 0, not -1.0$"):   # only the option that is wrong
         check_fit_config(FitConfig(background="outer", distortion_weight=-1.0))
-    with pytest.raises(UserError, match=r"^--ground-depth must be >= 0, not nan; --wall-margin must be in \(0, 0.25\], not 0.5$"):
+    with pytest.raises(UserError, match=r"^--ground-depth must be >= 0, or -1 \(where the ground is\), not nan; "
+                                        r"--wall-margin must be in \(0, 0.25\], not 0.5$"):
         check_fit_config(FitConfig(background="outer", ground_depth=float("nan"), wall_margin=0.5))
+    with pytest.raises(UserError, match=r"^--ground-depth must be >= 0, or -1 \(where the ground is\), not -0.5$"):
+        check_fit_config(FitConfig(background="outer", ground_depth=-0.5))
+
+
+def test_the_ground_texture_lies_as_far_under_the_floor_as_the_floor_was_lifted():
+    """The sparse box lifts its floor over the ground its points found (train/field/box_tighten.py reports by how
+    much, `ground_depth`); by default the ground's texture lies that far under the floor, in q units; an explicit
+    --ground-depth wins; no texture without a ground under the box or with --ground-texture 0."""
+    from snapshot3d.posed import PosedImages
+    from snapshot3d.train.field.config import FitConfig
+    from snapshot3d.train.field.fit import new_state
+    c2w = np.tile(np.eye(4, dtype=np.float32), (2, 1, 1))
+    c2w[:, 2, 3] = 4.0
+    box = np.array([[-1, -1, -0.9], [1, 1, 1.1]], np.float32)
+
+    def floor(info: dict, **fields):
+        posed = PosedImages(images=np.ones((2, 8, 8, 3), np.float32), alpha=None, c2w=c2w,
+                            intrinsics=np.tile(np.float32([8, 8, 4, 4]), (2, 1)), box=box, train=np.arange(2),
+                            test=np.arange(0), name="ground", info=info)
+        bg = new_state(posed, FitConfig(background="outer", **fields)).background
+        return None if bg.floor is None else (tuple(bg.floor.shape), bg.floor_depth)
+
+    scale = float(BoxFrame.from_box(box).scale)
+    shape, depth = floor({"ground_z": -0.9, "ground_depth": 0.05})
+    assert shape == (1, 3, 128, 128) and abs(depth - 0.05 / scale) < 1e-6
+    assert floor({"ground_z": -0.9, "ground_depth": 0.05}, ground_depth=0.0)[1] == 0.0
+    assert floor({"ground_z": -0.9})[1] == 0.0   # the ground a pre-fit's density found: the floor is on it
+    assert floor({"ground_z": None}) is None and floor({"ground_z": -0.9}, ground_texture=0) is None
 
 
 def test_bench_fit_captures_is_parsed_and_an_unknown_mode_refused(tmp_path):

@@ -110,7 +110,10 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig,
             if not cfg.tighten_sides:   # the floor alone
                 floor, box = box[0, 2], np.array(posed.box, np.float32)
                 box[0, 2] = floor
-            return box, {**info, "ground_z": float(box[0, 2]), "box_from": "sparse points", "prefit_steps": 0,
+            # the floor is lifted over the ground the points found; the ground's texture lies that far under it
+            depth = max(0.0, float(box[0, 2]) - found["sparse_ground"])
+            return box, {**info, "ground_z": float(box[0, 2]), "ground_depth": round(depth, 4),
+                         "box_from": "sparse points", "prefit_steps": 0,
                          "prefit_seconds": 0.0}, (
                 c2w.astype(np.float32) if cfg.bundle == "fit" and found.get("bundle", {}).get("adjusted") else None)
     return (*_tightened_by_prefit(posed, decoder, cfg, looks_down, info, device), None)

@@ -166,7 +166,7 @@ def _tightened(posed, decoder, cfg, device, quiet: bool, keep_adjusted: bool = F
     read = posed.info["capture"]
     ground = f", the ground at z = {info['ground_z']:.3g}" if info["ground_z"] is not None else ""
     ground += ", sides and top cut" if info.get("sides_cut") else ""
-    info_ground = {**posed.info, "ground_z": info["ground_z"]}
+    info_ground = {**posed.info, "ground_z": info["ground_z"], "ground_depth": info.get("ground_depth", 0.0)}
     if info["ground_z"] is not None and cfg.object_box > 0 and cfg.object_steps > 0:   # round the object's cells
         box, more = object_box(replace(posed, box=box, info=info_ground), decoder, cfg, device)
         info.update(more)

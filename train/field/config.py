@@ -64,13 +64,14 @@ class FitConfig:
                                            "box and as many after it")
     background_lr: float = config_field(0.05, "with --background outer: the outer field's learning rate (decayed as "
                                         "the planes')")
-    ground_texture: int = config_field(0, "with --background outer and the ground found under the object (the "
-                                       "box's floor cut there): texels per side of a colour texture on that floor, "
-                                       "the ground's look where it meets the object (part of the background model, "
-                                       "never carried; 0: off, as measured in docs/capture.md)")
-    ground_depth: float = config_field(0.0, "with --ground-texture: how far below the box's floor the texture's plane "
-                                       "lies (world units; the ground is found to a pre-fit cell, and the floor is cut "
-                                       "at that cell's top)")
+    ground_texture: int = config_field(128, "with --background outer and the ground found under the object (the "
+                                       "box's floor cut there): texels per side of a colour texture on the ground "
+                                       "under that floor, the ground's look where it meets the object (part of the "
+                                       "background model, never carried; 0: off; docs/capture.md)")
+    ground_depth: float = config_field(-1.0, "with --ground-texture: how far below the box's floor the texture's "
+                                       "plane lies (world units); -1: where the ground is, the floor's lift over the "
+                                       "ground that the sparse points found (0 where a pre-fit's density found it, "
+                                       "the floor cut at the top of the ground's cell)")
     distortion_weight: float = config_field(0.0, "with --background outer: weight of mip-NeRF 360's distortion loss "
                                             "on the box samples' weights (floaters spread along a ray cost)")
     opacity_weight: float = config_field(0.0, "with --background outer: weight of each ray's opacity in the box "
@@ -154,11 +155,12 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         *((k, v(k) > 0, "> 0") for k in ("lr", "lr-final", "pose-lr", "background-lr", "head-lr")),
         *((k, 0 <= v(k) <= 1, "in [0, 1]") for k in ("qat-fraction", "channel-fraction", "fg-fraction")),
         *((k, 0 <= v(k) < 1, "in [0, 1)") for k in ("min-transmittance", "pose-start")),
-        *((k, v(k) >= 0, ">= 0") for k in ("channel-noise", "ground-depth", "distortion-weight", "opacity-weight",
+        *((k, v(k) >= 0, ">= 0") for k in ("channel-noise", "distortion-weight", "opacity-weight",
                                            "wall-weight", "floor-weight")),
         ("background-res", cfg.background_res >= 4, ">= 4"),
         ("background-samples", cfg.background_samples >= 2, ">= 2"),
         ("ground-texture", 0 <= cfg.ground_texture <= 1024, "in 0..1024"),
+        ("ground-depth", cfg.ground_depth >= 0 or cfg.ground_depth == -1, ">= 0, or -1 (where the ground is)"),
         ("object-steps", 0 <= cfg.object_steps <= 4, "in [0, 4]"),
         ("object-box", 0 <= cfg.object_box <= 1, "in [0, 1]"),
         ("object-silhouette", 0 <= cfg.object_silhouette <= 1, "in [0, 1]"),
