@@ -118,6 +118,17 @@ def _side_by_side(path: Path, scene, truth, photos: np.ndarray, renders: np.ndar
     write_png(path, contact_sheet(tiles, cols=3))
 
 
+def _fit_seeds(text: str | None, seed: int) -> list[int]:
+    """--fit-seeds "0,1,2" -> [0, 1, 2]; None or "" -> [seed] (the capture's own); a one-line error otherwise."""
+    if not text:
+        return [seed]
+    try:
+        return [int(v) for v in text.split(",")]
+    except ValueError:
+        from snapshot3d.errors import UserError
+        raise UserError(f"--fit-seeds must be comma-separated integers, not {text!r}") from None
+
+
 def bench_fit_command(args) -> int:
     """`snapshot3d bench fit`: with --captures, this bench at CAPTURE_DEFAULTS (CAPTURE_QUICK with --quick);
     else `bench/fit.py`'s."""
@@ -145,15 +156,18 @@ def bench_capture_background_command(args) -> int:
                                 pose_noise_deg=getattr(args, "pose_noise_deg", 0.0),
                                 pose_noise_frac=getattr(args, "pose_noise_frac", 0.0))
     rows, name = [], getattr(args, "name", None) or "capture_background"
+    fit_seeds = _fit_seeds(getattr(args, "fit_seeds", None), args.seed)
     with tempfile.TemporaryDirectory() as tmp:
         for mesh in args.meshes.split(","):
             cap = make_capture(f"builtin:{mesh}", Path(tmp) / mesh, capcfg)
             for mode in args.modes.split(","):
-                fig = out / f"{name}_side_by_side_{mesh}.png" if getattr(args, "figure", False) and \
-                    mode.startswith("outer") else None
-                row = {"mesh": mesh, **fit_and_score(cap, mode, cfg, fig)}
-                print(json.dumps(row), flush=True)
-                rows.append(row)
+                for fit_seed in fit_seeds:   # the same capture fitted again: the fits' own spread
+                    fig = out / f"{name}_side_by_side_{mesh}.png" if getattr(args, "figure", False) and \
+                        mode.startswith("outer") and fit_seed == fit_seeds[0] else None
+                    row = {"mesh": mesh, **fit_and_score(cap, mode, replace(cfg, seed=fit_seed), fig),
+                           "fit_seed": fit_seed}
+                    print(json.dumps(row), flush=True)
+                    rows.append(row)
     report = {"meta": run_metadata(), "fit": asdict(cfg), "capture": {**asdict(capcfg), "lens": list(capcfg.lens)},
               "rows": rows}
     (out / f"{name}.json").write_text(json.dumps(report, indent=1))

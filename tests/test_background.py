@@ -273,6 +273,11 @@ def test_bench_fit_captures_is_parsed_and_an_unknown_mode_refused(tmp_path):
     proc = run_cli("bench", "capture-background", "--modes", "outer,bogus", "--out", str(tmp_path))
     assert_one_line_error(proc, "unknown fit 'bogus'")
     assert not list(tmp_path.iterdir())
+    proc = run_cli("bench", "capture-background", "--modes", "outer", "--fit-seeds", "0,x", "--out", str(tmp_path))
+    assert_one_line_error(proc, "--fit-seeds must be comma-separated integers, not '0,x'")
+    assert not list(tmp_path.iterdir())
+    from snapshot3d.bench.capture_background import _fit_seeds
+    assert _fit_seeds("", 2) == [2] and _fit_seeds("0,1,2", 2) == [0, 1, 2]
 
 
 def test_the_sides_and_top_are_cut_round_the_dense_cells_with_a_margin():

@@ -99,6 +99,8 @@ def add_commands(sub) -> None:
     bg.add_argument("--plane-res", type=int, default=64, help="plane resolution")
     bg.add_argument("--plane-channels", type=int, default=8, help="plane channels")
     bg.add_argument("--seed", type=int, default=0, help="capture and fit seed")
+    bg.add_argument("--fit-seeds", default="", help="comma-separated fit seeds, each fitting every capture and mode "
+                    "again (the fits' own spread; rows carry fit_seed); default: --seed")
     bg.add_argument("--pose-noise-deg", type=float, default=0.0, help="rms rotation error of the capture's written "
                     "poses (degrees; the fits are scored at the true poses)")
     bg.add_argument("--pose-noise-frac", type=float, default=0.0, help="rms position error of the written poses, a "
