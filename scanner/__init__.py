@@ -2,7 +2,7 @@
 
 Public surface (imported lazily on first use, so that `snapshot3d --help` stays fast):
     render_sheet(snapshot_rgb, meta, k) -> sheet RGB            (scanner.sheet)
-    simulate(sheet_rgb, severity, seed) -> (bytes, ext, truth)  (scanner.simulate)
+    simulate(sheet_rgb, severity, seed, print_seed=None) -> (bytes, ext, truth)  (scanner.simulate)
     scan_image(photo_bgr) -> ScanResult, scan_file(path)        (scanner.scan)
     capture(snapshot_rgb, meta, severity, seed) -> rectified RGB (scanner.roundtrip: sheet, photo, scan)
     detect_markers(image, dictionary) -> (ids (N,), corners (N, 4, 2))  (scanner.detect)

@@ -58,6 +58,8 @@ def simulate_command(args) -> int:
     if (args.severity or "mild") == "none" and ext != ".png":
         raise UserError("severity 'none' is lossless: write the photo as .png")
     integer(args.seed, "--seed", 0, 2 ** 32 - 1)
+    if args.print_seed is not None:
+        integer(args.print_seed, "--print-seed", 0, 2 ** 32 - 1)
     preset, solved = _simulate_preset(args)
     png = _sheet_png(Path(args.sheet))
     sheet = cv2.cvtColor(read_image_bgr(png, "sheet"), cv2.COLOR_BGR2RGB)
@@ -65,7 +67,7 @@ def simulate_command(args) -> int:
     if preset.physical and width_mm is not None:  # the printer's dots per snapshot pixel follow the print's size
         preset = replace(preset, print_dots_per_px=print_dots(width_mm))
     try:
-        data, kind, truth = simulate(sheet, preset, args.seed)
+        data, kind, truth = simulate(sheet, preset, args.seed, args.print_seed)
     except ValueError as e:
         raise UserError(str(e)) from None
     if (kind == ".png") != (ext == ".png"):  # keep the channel's bytes; only change the container
@@ -81,7 +83,8 @@ def simulate_command(args) -> int:
         f"profile {Path(args.profile).name}: {solved['base']} with defocus {solved['defocus_px']:.2f} px, noise "
         f"x{solved['noise_scale']:.2f}" + (f"; beyond the simulator's range in {', '.join(solved['clamped'])}"
                                           if solved["clamped"] else ""))
-    print(f"wrote {out} ({truth['frame'][0]}x{truth['frame'][1]}, {through}, seed {args.seed})")
+    print(f"wrote {out} ({truth['frame'][0]}x{truth['frame'][1]}, {through}, seed {args.seed}"
+          + ("" if args.print_seed is None else f", print seed {args.print_seed}") + ")")
     return 0
 
 

@@ -121,16 +121,18 @@ def _warp_print(printed: np.ndarray, dots_per_unit: float, pose: Pose, frame: np
     return (rx0, ry0, rx1, ry1)
 
 
-def simulate(sheet_rgb: np.ndarray, severity, seed: int) -> tuple[bytes, str, dict]:
+def simulate(sheet_rgb: np.ndarray, severity, seed: int, print_seed: int | None = None) -> tuple[bytes, str, dict]:
     """Photograph a sheet. sheet_rgb: (H, W, 3) uint8 RGB sheet image (`scanner.sheet`); severity: a preset
-    name (`scanner.presets.SEVERITIES`) or a `Preset`.
+    name (`scanner.presets.SEVERITIES`) or a `Preset`. `print_seed`: the print comes from its own seed (its
+    halftone screens and paper), so that several photos (`seed`s) show one print, as a user's do; None: the
+    print is drawn from `seed` too (one print per photo).
 
     Returns (encoded photo bytes, ".png" or ".jpg", truth) where truth holds `corners` (4, 2) of the
     snapshot in photo pixels, clockwise from the snapshot's top-left, and the preset and sampled values."""
     p = get_preset(severity)
     scale = sheet_scale(sheet_rgb)
     rng = np.random.default_rng(seed)
-    truth = {"severity": p.name, "seed": int(seed), "preset": p.as_dict()}
+    truth = {"severity": p.name, "seed": int(seed), "print_seed": print_seed, "preset": p.as_dict()}
     if not p.physical:
         to_px = layout.layout_to_pixels(scale)
         corners = layout.snapshot_corners() @ to_px[:2, :2].T + to_px[:2, 2]
@@ -141,7 +143,7 @@ def simulate(sheet_rgb: np.ndarray, severity, seed: int) -> tuple[bytes, str, di
         return buf.tobytes(), ".png" if q == 0 else ".jpg", truth
     W, H = p.frame
     d = max(1, round(p.print_dots_per_px / scale))
-    printed = print_sheet(sheet_rgb, p, d, rng)
+    printed = print_sheet(sheet_rgb, p, d, rng if print_seed is None else np.random.default_rng(print_seed))
     pose = sample_pose(p, rng)
     params: dict = {}
     names = background_names()

@@ -1,6 +1,7 @@
 """The phone side: restore and render with onnxruntime (numpy, OpenCV, onnxruntime; never torch).
 
-Public surface: `decode_photo(path)` (viewer.decode), `render_views`, `RenderConfig` (viewer.render),
+Public surface: `decode_photo(path)` (viewer.decode; `path` a list: several photos of one print, combined by
+`viewer.burst`), `render_views`, `RenderConfig` (viewer.render),
 `session`, `model_path` (viewer.runtime)."""
 
 __all__ = ["decode_photo", "render_views", "RenderConfig", "session", "model_path"]

@@ -54,17 +54,23 @@ def decode_command(args) -> int:
 
     check_views(args.views, args.size, (16, VIEW_SIZE[1]))
     integer(args.samples, "--samples", *SAMPLES)
+    photos = [args.photo] if isinstance(args.photo, (str, Path)) else list(args.photo)
     with progress(args.views, "decode", unit="view") as bar:
-        dec = decode_photo(args.photo, args.views, args.size, RenderConfig(samples=args.samples),
-                           on_view=lambda i: bar.update(1))
+        dec = decode_photo(photos if len(photos) > 1 else photos[0], args.views, args.size,
+                           RenderConfig(samples=args.samples), on_view=lambda i: bar.update(1))
     with staged_folder(args.output) as tmp:
         mesh = decoded_mesh(dec.baked, dec.scene.box) if args.mesh else None
         write_outputs(tmp, dec.views, dec.report, mesh)
         save_scene(dec.scene, tmp / "scene.s3d")
     r = dec.report
-    print(f"decoded {args.photo}: {len(dec.views)} views of {args.size}x{args.size} in {r['decode_ms']:.0f} ms "
+    print(f"decoded {', '.join(map(str, photos))}: {len(dec.views)} views of {args.size}x{args.size} in "
+          f"{r['decode_ms']:.0f} ms "
           f"(scan {r['timings_ms']['scan']:.0f}, restore {r['timings_ms']['restore']:.0f}, render "
           f"{r['timings_ms']['render']:.0f}); wrote {Path(args.output)}/")
+    for p in r.get("photos") or []:
+        print(f"  {p['photo']}: weight {p['weight']:.2f} " + (
+            f"(its pilots: gain {p['pilot_gain']:.3f}, noise {p['pilot_noise']:.3g})" if p["pilot_noise"] is not None
+            else "(its pilots read no signal)"))
     for line in _quality_lines(r["quality_estimate"]):
         print(line)
     if r.get("head_codes_unread"):

@@ -8,7 +8,9 @@ pilot signal, and the `restore_psnr` they predict) and the channel the print cod
 (`viewer.channel`: gain, noise, SNR, the nearest preset and advice; null values with a reason for a file codec)."""
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -30,7 +32,7 @@ from .render import RenderConfig, pad_planes, render_views
 from .runtime import scene_models
 
 __all__ = ["Decoded", "DecodedScene", "decode_scene", "decode_photo", "scene_from_meta", "read_input",
-           "restore_checked"]
+           "read_photos", "restore_checked"]
 
 
 @dataclass
@@ -114,6 +116,67 @@ def read_input(path):
     return res, res.snapshot, _meta(res.qr), "photo of a sheet"
 
 
+def read_photos(paths) -> tuple:
+    """`read_input` of several photos of one printed sheet (2 to `burst.MAX_PHOTOS`), combined into one capture
+    (`viewer.burst`): each is scanned and its pilots read alone, then the rectified captures are averaged with the
+    weights their pilots give. Returns (the scan of the photo with the largest weight, the combined capture
+    (380, 380, 3) uint8 RGB, the shared metadata, what the inputs were, one dict per photo: its name, weight,
+    pilot gain and noise). A UserError, prefixed with the photo's name, for a photo that does not read; also for a
+    snapshot file among them, photos of different prints, or a codec without pilots."""
+    from .burst import MAX_PHOTOS, MIN_MATCH, blue_weights, combine_captures, detail_match, pilot_residuals, same_sheet
+
+    names = [Path(p).name for p in paths]
+    if not 2 <= len(paths) <= MAX_PHOTOS:
+        raise UserError(f"give 1 to {MAX_PHOTOS} photos of one printed sheet, not {len(paths)}")
+    def scanned(path, name):
+        try:
+            res, snapshot, meta, _ = read_input(path)
+        except UserError as e:
+            raise UserError(f"{name}: {e}") from None
+        if res is None:
+            raise UserError(f"{name} is a snapshot file: only photos of one printed sheet are combined; decode it "
+                            f"alone")
+        return res, snapshot, meta
+    with ThreadPoolExecutor(min(len(paths), os.cpu_count() or 1)) as pool:   # OpenCV and numpy release the GIL
+        got = list(pool.map(scanned, paths, names))   # the first photo in order that fails raises
+    meta = same_sheet(names, [g[2] for g in got])
+    for (_, snapshot, _), name in zip(got[1:], names[1:]):
+        r = detail_match(got[0][1], snapshot)
+        if r < MIN_MATCH:
+            raise UserError(f"{name} shows another print than {names[0]} (the same scene in another picture: their "
+                            f"details match at r = {r:.2f}, photos of one print at 0.5 or more): give photos of one "
+                            f"printed sheet")
+    if CODEC_MEDIUM[meta.codec] != "print":
+        raise UserError(f"the photos' sheet carries codec {meta.codec} (the {CODEC_MEDIUM[meta.codec]} medium), which "
+                        f"has no pilots to weigh photos by: decode one photo")
+    reads = []
+    for _, snapshot, _ in got:
+        try:
+            reads.append(pilot_residuals(snapshot, *meta.planes, meta.codec))
+        except ValueError as e:   # the codec's own layout checks
+            raise UserError(f"codec {meta.codec} cannot restore planes of {meta.planes[0]}x{meta.planes[0]}, "
+                            f"{meta.planes[1]} channels: {str(e).splitlines()[0]}") from None
+    try:   # a photo whose pilots read nothing weighs 0
+        w = blue_weights([g for g, _ in reads], [r for _, r in reads])
+    except ValueError:
+        raise UserError(f"codec {meta.codec} read no signal in the pilots of any of the {len(paths)} photos (they do "
+                        f"not show the sheet's snapshot, or are damaged past reading)") from None
+    combined = combine_captures(np.stack([g[1] for g in got]), w)
+    photos = [{"photo": n, "weight": round(float(wi), 4), "pilot_gain": round(g, 4) if np.isfinite(g) else None,
+               "pilot_noise": float(f"{np.mean(r * r):.4g}") if np.all(np.isfinite(r)) else None}
+              for n, wi, (g, r) in zip(names, w, reads)]
+    return got[int(np.argmax(w))][0], combined, meta, f"{len(paths)} photos of a sheet, combined", photos
+
+
+def _inputs(path) -> tuple:
+    """`read_input` of one path, `read_photos` of a list or tuple of more: (scan, snapshot, meta, source,
+    photos or None)."""
+    paths = [path] if isinstance(path, (str, Path)) else list(path)
+    if len(paths) == 1:
+        return (*read_input(paths[0]), None)
+    return read_photos(paths)
+
+
 @dataclass
 class DecodedScene:
     """A photo or snapshot file turned into a scene and its baked grid, before any view is rendered
@@ -148,7 +211,9 @@ def _with_estimate(ds: "DecodedScene", timings: dict, channel, estimate) -> dict
 
 
 def decode_scene(path, cfg: RenderConfig = RenderConfig(), estimate: bool = True) -> DecodedScene:
-    """Scan (or read the snapshot file), restore and bake; the report has the timings of these stages.
+    """Scan (or read the snapshot file), restore and bake; the report has the timings of these stages. `path`:
+    one photo or snapshot file, or a list of photos of one printed sheet (`read_photos`; their reading alone
+    counts in the scan's time).
     `estimate`: also render the quality estimate's few small views (`viewer.quality_views`; `decode_photo`
     does that after the views, so that they come first)."""
     ds, channel, quality = _scene(path, cfg)
@@ -162,7 +227,7 @@ def _scene(path, cfg: RenderConfig):
     the channel block, for after the first view; and a callable views_psnr (None: no views term) -> the
     quality estimate, so that it is built once, with or without its views term."""
     t0 = time.perf_counter()
-    res, snapshot, meta, source = read_input(path)
+    res, snapshot, meta, source, photos = _inputs(path)
     t1 = time.perf_counter()
     planes, codec_info = restore_checked(snapshot, meta)
     t2 = time.perf_counter()
@@ -186,6 +251,8 @@ def _scene(path, cfg: RenderConfig):
         "scan": None if res is None else {k: v for k, v in res.report().items()
                                           if k in ("corners", "reprojection_px", "qr")},
     }
+    if photos is not None:   # several photos: the scan above is the one with the largest weight
+        report["photos"] = photos
     px = None if res is None else px_per_pixel(res.corners)
     channel = lambda: channel_report(meta.codec, snapshot, meta.planes, codec_info, px)  # noqa: E731
 
@@ -197,7 +264,8 @@ def _scene(path, cfg: RenderConfig):
 
 def decode_photo(path, views: int = formats.ORBIT_VIEWS, size: int = formats.ORBIT_SIZE,
                  cfg: RenderConfig = RenderConfig(), on_view=None) -> Decoded:
-    """The orbit's `views` views (size x size) of a photo or snapshot file; `on_view(i)` as each is done. Only
+    """The orbit's `views` views (size x size) of a photo or snapshot file, or of several photos of one sheet
+    (a list: `read_photos`); `on_view(i)` as each is done. Only
     what the views need comes before them: the channel block and the estimate's views term follow them
     (`timings_ms["first_view"]` and `decode_ms` count from the call, neither includes those two)."""
     t0 = time.perf_counter()

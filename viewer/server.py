@@ -35,6 +35,7 @@ from snapshot3d.codecs.print_feeds import layout_npz
 from snapshot3d.errors import UserError
 from snapshot3d.scanner.imageio_safe import image_size
 
+from .burst import MAX_PHOTOS
 from .render import RenderConfig
 from .runtime import model_path
 from .serve_config import ServeConfig
@@ -68,10 +69,10 @@ class Decoder:
     def busy(self) -> Busy:
         return Busy(503, f"busy: {self.cfg.max_decodes} decodes are running; retry shortly", {"Retry-After": "2"})
 
-    def _job(self, upload: Path, dropped: threading.Event) -> tuple[str, dict]:
+    def _job(self, uploads: list[Path], dropped: threading.Event) -> tuple[str, dict]:
         tmp = self.store.staging()
         try:
-            ds = write_scene(tmp, upload)
+            ds = write_scene(tmp, uploads if len(uploads) > 1 else uploads[0])
             if dropped.is_set():
                 raise ApiError(503, "dropped after the time limit")
             sid = self.store.publish(tmp)
@@ -79,15 +80,17 @@ class Decoder:
             return sid, json.loads((self.store.root / sid / "report.json").read_text())
         finally:
             self.store.discard(tmp)
-            shutil.rmtree(upload.parent, ignore_errors=True)
+            shutil.rmtree(uploads[0].parent, ignore_errors=True)
             self.slots.release()
 
-    async def run(self, upload: Path) -> tuple[str, dict]:
+    async def run(self, uploads: list[Path]) -> tuple[str, dict]:
+        """Decode the uploaded files (one photo or snapshot file, or several photos of one sheet, all in one
+        folder, which is removed after)."""
         if not self.slots.acquire(blocking=False):
-            shutil.rmtree(upload.parent, ignore_errors=True)
+            shutil.rmtree(uploads[0].parent, ignore_errors=True)
             raise self.busy()
         dropped = threading.Event()
-        fut = self.pool.submit(self._job, upload, dropped)
+        fut = self.pool.submit(self._job, uploads, dropped)
         try:
             return await asyncio.wait_for(asyncio.wrap_future(fut), self.cfg.timeout_s)
         except asyncio.TimeoutError:
@@ -177,27 +180,37 @@ def create_app(cfg: ServeConfig = ServeConfig()) -> FastAPI:
     def healthz():
         return {"ok": True, "version": __version__, "scenes": len(store.ids()), "limits": asdict(cfg)}
 
-    @app.post(DECODE_PATH, summary="decode a phone photo of a sheet, or a snapshot file, into a scene")
-    async def decode(file: UploadFile = File(..., description="JPEG or PNG: a photo of a printed sheet, or a "
-                                                              "snapshot file (its metadata in its text or pixels)")):
-        name = re.sub(r"[^A-Za-z0-9._-]", "_", Path(file.filename or "").name)[-80:].lstrip(".") or "upload"
+    @app.post(DECODE_PATH, summary="decode a phone photo of a sheet, or a snapshot file, into a scene; or several "
+                                   "photos of one printed sheet, combined")
+    async def decode(file: list[UploadFile] = File(..., description="JPEG or PNG: a photo of a printed sheet, or a "
+                                                                    "snapshot file (its metadata in its text or "
+                                                                    "pixels); repeat the field for up to "
+                                                                    f"{MAX_PHOTOS} photos of one printed sheet")):
+        if len(file) > MAX_PHOTOS:
+            raise ApiError(422, f"{len(file)} files: give 1 to {MAX_PHOTOS} photos of one printed sheet")
         (uploads / (token := secrets.token_hex(8))).mkdir()
-        path = uploads / token / name  # errors name the user's file, not a temporary one
+        paths = []
         try:
-            with path.open("wb") as f:
-                while chunk := await file.read(1 << 20):
-                    f.write(chunk)
-            try:
-                w, h, _ = image_size(path, "upload")
-            except UserError as e:
-                raise ApiError(413 if "pixels" in str(e) else 415, str(e)) from None
-            if w * h > cfg.max_pixels_mp * 1e6:
-                raise ApiError(413, f"photo of {w}x{h} pixels ({w * h / 1e6:.0f} MP) is over the "
-                                    f"{cfg.max_pixels_mp:.0f} MP limit")
+            for i, part in enumerate(file):
+                name = re.sub(r"[^A-Za-z0-9._-]", "_", Path(part.filename or "").name)[-80:].lstrip(".") or "upload"
+                if any(p.name == name for p in paths):
+                    name = f"{i + 1}-{name}"
+                path = uploads / token / name  # errors name the user's file, not a temporary one
+                paths.append(path)
+                with path.open("wb") as f:
+                    while chunk := await part.read(1 << 20):
+                        f.write(chunk)
+                try:
+                    w, h, _ = image_size(path, "upload")
+                except UserError as e:
+                    raise ApiError(413 if "pixels" in str(e) else 415, str(e)) from None
+                if w * h > cfg.max_pixels_mp * 1e6:
+                    raise ApiError(413, f"photo {name} of {w}x{h} pixels ({w * h / 1e6:.0f} MP) is over the "
+                                        f"{cfg.max_pixels_mp:.0f} MP limit")
         except BaseException:
-            shutil.rmtree(path.parent, ignore_errors=True)
+            shutil.rmtree(uploads / token, ignore_errors=True)
             raise
-        sid, report = await decoder.run(path)
+        sid, report = await decoder.run(paths)
         return {"scene_id": sid, "report": report, **_links(sid)}
 
     @app.get("/v1/scenes/{sid}", summary="a scene's report and links")

@@ -56,8 +56,9 @@ class BakedCache:
 
 
 def write_scene(folder: Path, path, cfg: RenderConfig = RenderConfig()) -> DecodedScene:
-    """Decode the photo or snapshot file at `path` into `folder`: scene.s3d, report.json, grid.bin.gz and
-    capture.png (the rectified, colour-corrected capture the restore read, (380, 380, 3) RGB). A non-finite
+    """Decode the photo or snapshot file at `path` (or several photos of one sheet, a list) into `folder`:
+    scene.s3d, report.json, grid.bin.gz and capture.png (the rectified, colour-corrected capture the restore read,
+    (380, 380, 3) RGB; for several photos, their combination). A non-finite
     scene or report is refused (UserError) before anything is written."""
     ds = decode_scene(path, cfg)
     report = dict(ds.report, views=formats.ORBIT_VIEWS, size=formats.ORBIT_SIZE)

@@ -232,6 +232,19 @@ def add_commands(sub) -> None:
     _quick(be, scenes="bench/models/spot-print.s3d", hosts="coffee", heldout=0, severities="moderate", seeds=1,
            views=2, size=48)
 
+    bb = add(bsub, "burst", "several photos of one print against one: e2e_psnr of each photo alone, the best by the "
+                            "pilots, the captures' mean and their pilot-weighted mean (what decode does with several)",
+             _run("snapshot3d.bench.burst", "bench_burst_command"))
+    _out(bb)
+    bb.add_argument("--scene", default="bench/models/spot-print-head-refit.s3d", help="scene file (fitted for print)")
+    bb.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos")
+    bb.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
+    bb.add_argument("--severities", default="mild,moderate,severe", help="comma-separated physical severities")
+    bb.add_argument("--prints", type=int, default=2, help="prints per host and severity")
+    bb.add_argument("--photos", type=int, default=4, help="photos per print (2 to 8)")
+    bb.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
+    _quick(bb, hosts="coffee", heldout=0, severities="moderate", prints=1, photos=2, views=1)
+
     bs = add(bsub, "decoder-search", "candidate shared decoders scored by what they fit: spot and lego at small "
                                      "plane sizes, field_psnr clean and with plane noise (JSON lines; for a GPU)",
              _run("snapshot3d.bench.decoder_search", "bench_decoder_search_command"))

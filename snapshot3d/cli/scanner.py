@@ -35,6 +35,10 @@ def add_commands(sub) -> None:
     m.add_argument("--profile", help="photograph through a measured channel instead of a preset: a channel profile "
                                      "(.json) from `snapshot3d calibrate`")
     m.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same photo")
+    m.add_argument("--print-seed", type=int, default=None,
+                   help="seed of the print itself (its halftone and paper): photos with other --seed values and the "
+                        "same --print-seed show one print, as several photos of one sheet do (`decode` combines "
+                        "them); default: a new print per photo")
     m.add_argument("--truth", help="write the true snapshot corners and the preset's parameters here (JSON)")
 
     c = _add(sub, "scan", "find the sheet in a photo and rectify the snapshot (numpy + OpenCV)",

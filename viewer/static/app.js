@@ -26,12 +26,12 @@
     if (isError) state.error = text;
   }
 
-  // multipart upload with progress; resolves with {status, json}
-  function upload(file) {
+  // multipart upload with progress (one file, or several photos of one printed sheet); resolves with {status, json}
+  function upload(files) {
     return new Promise((resolve, reject) => {
       const xhr = new XMLHttpRequest();
       const form = new FormData();
-      form.append("file", file, file.name || "photo.jpg");
+      files.forEach((file, i) => form.append("file", file, file.name || `photo-${i + 1}.jpg`));
       xhr.open("POST", "/v1/decode");
       xhr.responseType = "json";
       xhr.upload.onprogress = (e) => {
@@ -136,14 +136,15 @@
     state.local = got;
   }
 
-  async function decode(file) {
+  // one file, or several photos of one printed sheet (the server combines them, each weighted by its pilots)
+  async function decode(files) {
     state.ready = false; state.error = null; state.firstViewMs = null; state.local = null;
     started = performance.now();
     $("progress").hidden = false; $("progress").value = 0;
     try {
-      const here = hasWebGL2() ? await S3DLocal.readable(file).catch(() => null) : null;
-      if (here) { await decodeHere(file, here.meta); return; }
-      const res = await upload(file);
+      const here = files.length === 1 && hasWebGL2() ? await S3DLocal.readable(files[0]).catch(() => null) : null;
+      if (here) { await decodeHere(files[0], here.meta); return; }
+      const res = await upload(files);
       if (res.status !== 200) {
         const why = (res.json && res.json.error) || `the server answered ${res.status}`;
         throw new Error(res.status === 503 ? `${why} (try again in ${res.retry || "a few"} s)` : why);
@@ -159,7 +160,7 @@
       status(`Decoded in ${Math.round(t.scan + t.restore + t.bake)} ms (${body.report.source}); ` +
              (state.mode === "webgl2" ? "rendered here with WebGL2." : "frames from the server (no WebGL2)."));
     } catch (e) {
-      status(`Could not decode this photo: ${e.message}`, true);
+      status(`Could not decode ${files.length > 1 ? "these photos" : "this photo"}: ${e.message}`, true);
     } finally {
       $("progress").hidden = true;
     }
@@ -172,12 +173,12 @@
     return webgl2;
   }
 
-  $("photo").addEventListener("change", (e) => { if (e.target.files[0]) decode(e.target.files[0]); });
+  $("photo").addEventListener("change", (e) => { if (e.target.files.length) decode(Array.from(e.target.files)); });
   // drop a photo or a snapshot file anywhere on the page
   document.addEventListener("dragover", (e) => e.preventDefault());
   document.addEventListener("drop", (e) => {
     e.preventDefault();
-    if (e.dataTransfer.files[0]) decode(e.dataTransfer.files[0]);
+    if (e.dataTransfer.files.length) decode(Array.from(e.dataTransfer.files));
   });
 
   // drag to orbit, pinch or wheel to zoom
