@@ -86,13 +86,19 @@ def _sheet(host: str):
 
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory):
-    """Three `moderate` photos of one print of spot in coffee, and one of a print of it in chelsea (JPEG files)."""
+    """Three `moderate` photos of one print of spot in coffee, one of a print of it in chelsea, and one of the coffee
+    print with ink over its QR code (JPEG files)."""
     from snapshot3d.scanner.simulate import simulate
     root = tmp_path_factory.mktemp("burst")
     (coffee, scene), (chelsea, _) = _sheet("coffee"), _sheet("chelsea")
+    inked = coffee.copy()
+    x0, y0, x1, y1 = formats.QR_BOX
+    sx0, sy0 = formats.SHEET_BOX[:2]
+    inked[(y0 - sy0) * 2:(y1 - sy0) * 2, (x0 - sx0) * 2:(x1 - sx0) * 2] = 0
     paths = []
     for name, sheet, seed, pseed in (("a.jpg", coffee, 0, PRINT), ("b.jpg", coffee, 1, PRINT),
-                                     ("c.jpg", coffee, 2, PRINT), ("cat.jpg", chelsea, 0, PRINT)):
+                                     ("c.jpg", coffee, 2, PRINT), ("cat.jpg", chelsea, 0, PRINT),
+                                     ("inked.jpg", inked, 3, PRINT)):
         (root / name).write_bytes(simulate(sheet, "moderate", seed, print_seed=pseed)[0])
         paths.append(root / name)
     return paths, scene
@@ -113,6 +119,18 @@ def test_three_photos_of_one_print_restore_better_than_one(photos):
     assert sum(p["weight"] for p in got) == pytest.approx(1.0, abs=2e-4)
     assert got[int(np.argmin(singles))]["weight"] == max(p["weight"] for p in got)   # the best photo leads
     assert ds.report["source"] == "3 photos of a sheet, combined"
+
+
+def test_a_photo_whose_qr_code_is_unread_joins_one_that_read_it(photos):
+    """The QR code (scene box, plane size, codec) is read once for all; a photo that missed it still counts."""
+    from snapshot3d.viewer.decode import decode_scene, read_photos
+    paths, _ = photos
+    ds = decode_scene([paths[4], paths[0]], estimate=False)
+    got = {p["photo"]: p for p in ds.report["photos"]}
+    assert got["inked.jpg"]["qr_read"] is False and got["a.jpg"]["qr_read"] is True
+    assert got["inked.jpg"]["weight"] > 0.05
+    with pytest.raises(UserError, match="could not read its QR code"):
+        read_photos([paths[4], paths[4]])
 
 
 def test_decode_combines_photos_without_torch(photos, tmp_path):
@@ -189,3 +207,11 @@ def test_the_page_sends_several_photos_of_one_print(photos, browser, base_url):
     page.wait_for_function("window.snapshot3d.ready || window.snapshot3d.error", timeout=60000)
     assert page.evaluate("snapshot3d.error") is None and not errors, errors
     assert "2 photos of a sheet, combined" in page.inner_text("#status")
+
+
+def test_a_poor_estimate_suggests_several_photos():
+    from snapshot3d.viewer.commands import POOR_DB, _quality_lines
+    q = {"restore_psnr_expected_db": POOR_DB - 1, "basis": "the pilots", "calibration": {"held_out_rmse_db": 1.3}}
+    lines = _quality_lines(q)
+    assert len(lines) == 2 and "several photos of the print decode better together" in lines[1]
+    assert len(_quality_lines(dict(q, restore_psnr_expected_db=POOR_DB + 1))) == 1

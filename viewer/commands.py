@@ -40,7 +40,8 @@ def _quality_lines(q: dict) -> list[str]:
              f"typical error {q['calibration']['held_out_rmse_db']:.1f} dB)"]
     if expected < POOR_DB:
         lines.append("warning: the views will be poor (blurred or wrong shapes): retake the photo with even light, "
-                     "in focus, square on, and print the sheet larger")
+                     "in focus, square on, and print the sheet larger; several photos of the print decode better "
+                     "together (decode P1 P2 P3)")
     return lines
 
 

@@ -93,10 +93,11 @@ def restore_checked(snapshot: np.ndarray, meta) -> tuple[np.ndarray, dict]:
     return planes, info
 
 
-def read_input(path):
+def read_input(path, need_qr: bool = True):
     """(scan result or None, snapshot (380, 380, 3) uint8 RGB, metadata, what the file was) of a photo of a
     sheet, or of a snapshot file (its text metadata or the mark in its pixels; a copy re-encoded, resized or
-    cropped by sharing is realigned)."""
+    cropped by sharing is realigned). `need_qr` False: a photo whose QR code was not read gives metadata None
+    (another photo of the same print may have read it) instead of a UserError."""
     import cv2
 
     from snapshot3d.scanner.imageio_safe import read_image_bgr
@@ -113,7 +114,7 @@ def read_input(path):
         raise UserError(f"{Path(path).name} is {n}x{n} like a snapshot file but carries no snapshot3d metadata (no "
                         f"text chunk, no mark readable in its pixels): not a snapshot, or damaged past reading")
     res = scan_file(path, img)
-    return res, res.snapshot, _meta(res.qr), "photo of a sheet"
+    return res, res.snapshot, _meta(res.qr) if need_qr or res.qr is not None else None, "photo of a sheet"
 
 
 def read_photos(paths) -> tuple:
@@ -130,7 +131,7 @@ def read_photos(paths) -> tuple:
         raise UserError(f"give 1 to {MAX_PHOTOS} photos of one printed sheet, not {len(paths)}")
     def scanned(path, name):
         try:
-            res, snapshot, meta, _ = read_input(path)
+            res, snapshot, meta, _ = read_input(path, need_qr=False)
         except UserError as e:
             raise UserError(f"{name}: {e}") from None
         if res is None:
@@ -139,13 +140,17 @@ def read_photos(paths) -> tuple:
         return res, snapshot, meta
     with ThreadPoolExecutor(min(len(paths), os.cpu_count() or 1)) as pool:   # OpenCV and numpy release the GIL
         got = list(pool.map(scanned, paths, names))   # the first photo in order that fails raises
-    meta = same_sheet(names, [g[2] for g in got])
-    for (_, snapshot, _), name in zip(got[1:], names[1:]):
-        r = detail_match(got[0][1], snapshot)
+    read = [i for i, g in enumerate(got) if g[2] is not None]   # the photos whose QR code was read
+    if not read:
+        _meta(None)   # the one-line error of a photo whose QR code cannot be read
+    meta = same_sheet([names[i] for i in read], [got[i][2] for i in read])
+    first = read[0]
+    for i, ((_, snapshot, _), name) in enumerate(zip(got, names)):
+        r = detail_match(got[first][1], snapshot) if i != first else 1.0
         if r < MIN_MATCH:
-            raise UserError(f"{name} shows another print than {names[0]} (the same scene in another picture: their "
-                            f"details match at r = {r:.2f}, photos of one print at 0.5 or more): give photos of one "
-                            f"printed sheet")
+            raise UserError(f"{name} shows another print than {names[first]} (the same scene in another picture: "
+                            f"their details match at r = {r:.2f}, photos of one print at 0.5 or more): give photos of "
+                            f"one printed sheet")
     if CODEC_MEDIUM[meta.codec] != "print":
         raise UserError(f"the photos' sheet carries codec {meta.codec} (the {CODEC_MEDIUM[meta.codec]} medium), which "
                         f"has no pilots to weigh photos by: decode one photo")
@@ -163,9 +168,17 @@ def read_photos(paths) -> tuple:
                         f"not show the sheet's snapshot, or are damaged past reading)") from None
     combined = combine_captures(np.stack([g[1] for g in got]), w)
     photos = [{"photo": n, "weight": round(float(wi), 4), "pilot_gain": round(g, 4) if np.isfinite(g) else None,
-               "pilot_noise": float(f"{np.mean(r * r):.4g}") if np.all(np.isfinite(r)) else None}
-              for n, wi, (g, r) in zip(names, w, reads)]
+               "pilot_noise": float(f"{np.mean(r * r):.4g}") if np.all(np.isfinite(r)) else None,
+               "qr_read": gi[0].qr is not None, "head_read": _head_read(gi[0].qr)}
+              for n, wi, (g, r), gi in zip(names, w, reads, got)]
     return got[int(np.argmax(w))][0], combined, meta, f"{len(paths)} photos of a sheet, combined", photos
+
+
+def _head_read(qr: dict | None) -> bool | None:
+    """Whether a photo's scan read the scene's own head (None: its QR code was not read, or names no head)."""
+    if qr is None or (qr.get("head") is None and qr.get("head_codes") != "unread"):
+        return None
+    return qr.get("head") is not None
 
 
 def _inputs(path) -> tuple:
@@ -245,7 +258,9 @@ def _scene(path, cfg: RenderConfig):
         "quality_estimate": None,   # `estimate` below, after the views
         "channel": None,   # `channel` below, after the views
         "planes": list(meta.planes), "decoder": scene.decoder_version, "own_head": scene.head is not None,
-        "head_codes_unread": bool(res is not None and res.qr and res.qr.get("head_codes") == "unread"),
+        "head_codes_unread": meta.head is None and (any(p["head_read"] is False for p in photos) if photos else
+                                                    bool(res is not None and res.qr and
+                                                         res.qr.get("head_codes") == "unread")),
         "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
         "scan": None if res is None else {k: v for k, v in res.report().items()
