@@ -134,12 +134,21 @@ def test_a_photo_whose_qr_code_is_unread_joins_one_that_read_it(photos):
 
 
 def test_decode_combines_photos_without_torch(photos, tmp_path):
+    import shutil
     paths, _ = photos
-    proc = run_blocked("decode", str(paths[0]), str(paths[1]), "-o", str(tmp_path / "out"), "--views", "2",
-                       "--size", "48")
+    burst = tmp_path / "burst"   # a folder of photos, as a phone's burst is copied
+    burst.mkdir()
+    for p in paths[:2]:
+        shutil.copy(p, burst / p.name)
+    (burst / "notes.txt").write_text("not a photo")
+    proc = run_blocked("decode", str(burst), "-o", str(tmp_path / "out"), "--views", "2", "--size", "48")
     assert proc.returncode == 0, proc.stderr
     assert "a.jpg: weight" in proc.stdout and "b.jpg: weight" in proc.stdout
     assert (tmp_path / "out" / "views" / "001.png").is_file()
+    (tmp_path / "empty").mkdir()
+    assert_one_line_error(run_blocked("decode", str(tmp_path / "empty"), "-o", str(tmp_path / "out2")),
+                          "is a folder with no .jpg or .png photo in it")
+    assert not (tmp_path / "out2").exists()
 
 
 def test_photos_of_another_print_or_a_snapshot_file_are_refused(photos, tmp_path):

@@ -45,6 +45,22 @@ def _quality_lines(q: dict) -> list[str]:
     return lines
 
 
+def _photo_paths(args: list) -> list:
+    """decode's inputs with each folder replaced by its photos (.jpg, .jpeg, .png, by name): a phone's burst
+    copied to the computer as it came."""
+    out = []
+    for a in args:
+        if Path(a).is_dir():
+            found = sorted(p for p in Path(a).iterdir()
+                           if p.is_file() and p.suffix.lower() in (".jpg", ".jpeg", ".png"))
+            if not found:
+                raise UserError(f"{a} is a folder with no .jpg or .png photo in it")
+            out += [str(p) for p in found]
+        else:
+            out.append(a)
+    return out
+
+
 def decode_command(args) -> int:
     from snapshot3d.progress import progress
     from snapshot3d.scene import save_scene
@@ -55,7 +71,7 @@ def decode_command(args) -> int:
 
     check_views(args.views, args.size, (16, VIEW_SIZE[1]))
     integer(args.samples, "--samples", *SAMPLES)
-    photos = [args.photo] if isinstance(args.photo, (str, Path)) else list(args.photo)
+    photos = _photo_paths([args.photo] if isinstance(args.photo, (str, Path)) else list(args.photo))
     with progress(args.views, "decode", unit="view") as bar:
         dec = decode_photo(photos if len(photos) > 1 else photos[0], args.views, args.size,
                            RenderConfig(samples=args.samples), on_view=lambda i: bar.update(1))

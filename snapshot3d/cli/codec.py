@@ -46,7 +46,8 @@ def add_commands(sub) -> None:
               _run("snapshot3d.viewer.commands", "decode_command"))
     dc.add_argument("photo", nargs="+", help="photo (.jpg or .png) of a printed snapshot3d sheet, or a snapshot file "
                                              "(also a shared copy with its text stripped); several photos of one "
-                                             "printed sheet (up to 8) are combined, each weighted by its pilots")
+                                             "printed sheet (up to 8, or a folder of them) are combined, each "
+                                             "weighted by its pilots")
     dc.add_argument("-o", "--output", required=True, help="output folder")
     dc.add_argument("--views", type=int, default=20, help="orbit views")
     dc.add_argument("--size", type=int, default=380, help="view size in pixels")
