@@ -102,8 +102,8 @@ def _summary(rows: list[dict], severities: list[str], photos: int) -> dict:
         out[sev] = {"single": single, "prints": len({(r["host"], r["print"]) for r in at}),
                     "pilot_corr": median([r for r in at if r["method"] == "pilots"], "pilot_corr")}
         for m in METHODS[1:]:
-            out[sev][m] = {k: median([r for r in at if r["method"] == m and r["k"] == k], "e2e_psnr")
-                           for k in range(2, photos + 1)}
+            out[sev][m] = {str(k): median([r for r in at if r["method"] == m and r["k"] == k], "e2e_psnr")
+                           for k in range(2, photos + 1)}   # keys as the JSON file has them
     return out
 
 
@@ -191,7 +191,7 @@ def bench_burst_command(args) -> int:
     _chart(doc, out / "burst.png")
     _side_by_side(kept, e2e, scene, out / "burst_side_by_side.png", args.photos)
     for sev, s in doc["summary"].items():
-        k = str(args.photos) if str(args.photos) in s["pilots"] else args.photos
+        k = str(args.photos)
         print(f"{sev}: one photo {s['single']:.2f} dB; {args.photos} photos weighted by the pilots "
               f"{s['pilots'][k]:.2f}, as if independent {s['independent'][k]:.2f}, the best of them "
               f"{s['best'][k]:.2f}, their mean {s['mean'][k]:.2f} (pilot residuals correlate {s['pilot_corr']:.2f})")

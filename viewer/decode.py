@@ -74,6 +74,12 @@ def _checked(meta):
     return meta
 
 
+def _layout_refused(meta, e: ValueError) -> UserError:
+    """The one-line error of a plane size or codec that the codec's layout refuses."""
+    return UserError(f"codec {meta.codec} cannot restore planes of {meta.planes[0]}x{meta.planes[0]}, "
+                     f"{meta.planes[1]} channels: {str(e).splitlines()[0]}")
+
+
 def restore_checked(snapshot: np.ndarray, meta) -> tuple[np.ndarray, dict]:
     """`media.restore_planes` of a snapshot and its checked metadata (`scanner.qr.check_meta`): planes
     (3, C, R, R) float32 and the codec's info, every number finite. A reading the codec cannot measure (the
@@ -82,8 +88,7 @@ def restore_checked(snapshot: np.ndarray, meta) -> tuple[np.ndarray, dict]:
     try:
         planes, info = restore_planes(snapshot, meta)
     except ValueError as e:   # the codec's own layout checks
-        raise UserError(f"codec {meta.codec} cannot restore planes of {meta.planes[0]}x{meta.planes[0]}, "
-                        f"{meta.planes[1]} channels: {str(e).splitlines()[0]}") from None
+        raise _layout_refused(meta, e) from None
     bad = sorted(k for k, v in info.items() if isinstance(v, float) and not np.isfinite(v))
     if bad or not np.all(np.isfinite(planes)):
         what = ", ".join(f"{k} {info[k]}" for k in bad) or "planes not finite"
@@ -159,8 +164,7 @@ def read_photos(paths) -> tuple:
         try:
             reads.append(pilot_residuals(snapshot, *meta.planes, meta.codec))
         except ValueError as e:   # the codec's own layout checks
-            raise UserError(f"codec {meta.codec} cannot restore planes of {meta.planes[0]}x{meta.planes[0]}, "
-                            f"{meta.planes[1]} channels: {str(e).splitlines()[0]}") from None
+            raise _layout_refused(meta, e) from None
     try:   # a photo whose pilots read nothing weighs 0
         w = blue_weights([g for g, _ in reads], [r for _, r in reads])
     except ValueError:
