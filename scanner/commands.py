@@ -144,4 +144,8 @@ def scan_command(args) -> int:
     qr = "QR unreadable" if res.qr is None else f"QR codec {res.qr['codec']!r}"
     print(f"wrote {out} (confidence {res.confidence:.2f}, reprojection {res.reprojection_px:.2f} px, {qr}, "
           f"{res.timings_ms['total']:.0f} ms + {dec:.0f} ms decoding)")
+    ph = res.photo
+    blur = "not measured" if ph["blur_px"] is None else f"{ph['blur_px']:.2f} snapshot px"
+    print(f"photo: sheet tilted {ph['tilt_deg']:.0f} degrees, blur {blur}, {100 * ph['glare_share']:.1f}% of the "
+          f"snapshot brighter than its paper (glare)")
     return 0

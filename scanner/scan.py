@@ -7,7 +7,7 @@ Every failure is a one-line `UserError` naming its cause."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -19,12 +19,13 @@ from snapshot3d.errors import UserError
 from snapshot3d.head import parse_head
 
 from . import layout
-from .colour import apply_colour, fit_colour, linear_lut, marker_contrast
+from .colour import apply_colour, fit_colour, flat_field, linear_lut, marker_contrast
 from .detect import detect_markers, make_detector, refine_corners
 from .diagnose import SHARPNESS_MIN, exposure_problem, sharpness
 from .fit import Fit, fit_geometry
 from .headcode import HEAD_CODES_FIELD, join_head
 from .imageio_safe import read_image_bgr
+from .photo_check import check_photo
 from .pilot import pilot_psnr
 from .qr import check_meta, decode_payload, read_qr
 from .rectify import OVERSAMPLE, photo_px_per_unit, rectify_box, rectify_sheet
@@ -37,7 +38,7 @@ MIN_SNAPSHOT_PX = 380     # at least one photo pixel per snapshot pixel: below, 
 MIN_CONTRAST = 0.3        # (paper - marker ink) / paper below this: washed out
 QR_MODULES = (21, 25, 29, 33, 37, 41)  # QR versions 1-6: the sheet's payloads fit these (its head codes: 5)
 HEAD_CODE_SCALE = 6      # px per layout unit the head codes are read at, from the photo
-REPORT_KEYS = ("detected", "corners", "reprojection_px", "confidence", "pilot_psnr", "qr", "timings_ms")
+REPORT_KEYS = ("detected", "corners", "reprojection_px", "confidence", "pilot_psnr", "qr", "photo", "timings_ms")
 
 
 @dataclass
@@ -55,11 +56,14 @@ class ScanResult:
     pilot_psnr: float = float("nan")
     markers: list = field(default_factory=list)
     fit: Fit | None = None
+    photo: dict | None = None
+    """what the photo did to the print: its tilt, blur and glare (`scanner.photo_check`)"""
 
     def report(self) -> dict:
         return {"detected": True, "corners": np.round(self.corners, 3).tolist(),
                 "reprojection_px": round(float(self.reprojection_px), 4), "confidence": round(float(self.confidence), 3),
-                "pilot_psnr": round(float(self.pilot_psnr), 2), "qr": self.qr, "timings_ms": {k: round(v, 2) for k, v in self.timings_ms.items()}}
+                "pilot_psnr": round(float(self.pilot_psnr), 2), "qr": self.qr, "photo": self.photo,
+                "timings_ms": {k: round(v, 2) for k, v in self.timings_ms.items()}}
 
 
 @lru_cache(maxsize=1)
@@ -185,10 +189,13 @@ def scan_image(img: np.ndarray, chart: bool = False) -> ScanResult:
     t1 = time.perf_counter()
     qr = _read_qr(hi, img, fit, chart)
     t["qr"] = (time.perf_counter() - t1) * 1e3
+    t1 = time.perf_counter()
+    photo = check_photo(img, fit, mids, flat_field(model, lo[-sy0:-sy0 + n, -sx0:-sx0 + n], (0, 0, n, n)))
+    t["check"] = (time.perf_counter() - t1) * 1e3
     t["total"] = (time.perf_counter() - t0) * 1e3
     rms_snap = fit.rms_px / photo_px_per_unit(fit)
     conf = len(mids) / 4 * float(np.exp(-max(0.0, rms_snap - 0.3))) * (1.0 if qr else 0.8)
-    return ScanResult(snapshot, corners, fit.rms_px, conf, qr, t, pilot, mids, fit)
+    return ScanResult(snapshot, corners, fit.rms_px, conf, qr, t, pilot, mids, fit, asdict(photo))
 
 
 @lru_cache(maxsize=1)

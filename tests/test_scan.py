@@ -143,6 +143,8 @@ def test_cli_scan_ok_writes_report(tmp_path, sheet):
     assert proc.returncode == 0, proc.stderr
     rep = json.loads((tmp_path / "r.json").read_text())
     assert tuple(rep) == REPORT_KEYS and rep["detected"] is True and np.array(rep["corners"]).shape == (4, 2)
+    assert rep["photo"]["tilt_deg"] < 1.0 and rep["photo"]["glare_share"] == 0.0   # the sheet's image itself
+    assert "photo: sheet tilted 0 degrees" in proc.stdout
     assert cv2.imread(str(tmp_path / "r.png")).shape == (N, N, 3) and (tmp_path / "d.png").is_file()
 
 

@@ -30,8 +30,9 @@ def write_outputs(folder: Path, views: np.ndarray, report: dict, mesh=None) -> N
     (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
 
 
-def _quality_lines(q: dict) -> list[str]:
-    """What decode says about the views' expected quality (one or two lines)."""
+def _quality_lines(q: dict, retake: list[str] | None = None) -> list[str]:
+    """What decode says about the views' expected quality (one or two lines); `retake`: what the photo check
+    found wrong with the photo (the report's `retake`), which a poor estimate names."""
     expected = q.get("restore_psnr_expected_db")
     if expected is None:
         why = "no calibration shipped" if q.get("pilot_psnr_db") is not None else "a snapshot file has no markers"
@@ -39,9 +40,10 @@ def _quality_lines(q: dict) -> list[str]:
     lines = [f"quality estimate: restore_psnr about {expected:.1f} dB (from {q['basis']}, "
              f"typical error {q['calibration']['held_out_rmse_db']:.1f} dB)"]
     if expected < POOR_DB:
-        lines.append("warning: the views will be poor (blurred or wrong shapes): retake the photo with even light, "
-                     "in focus, square on, and print the sheet larger; several photos of the print decode better "
-                     "together (decode P1 P2 P3)")
+        fix = "; ".join(retake) if retake else ("retake the photo with even light, in focus, square on, and print "
+                                                "the sheet larger")
+        lines.append(f"warning: the views will be poor (blurred or wrong shapes): {fix}; several photos of the print "
+                     f"decode better together (decode P1 P2 P3)")
     return lines
 
 
@@ -88,7 +90,7 @@ def decode_command(args) -> int:
         print(f"  {p['photo']}: weight {p['weight']:.2f} " + (
             f"(its pilots: gain {p['pilot_gain']:.3f}, noise {p['pilot_noise']:.3g})" if p["pilot_noise"] is not None
             else "(its pilots read no signal)"))
-    for line in _quality_lines(r["quality_estimate"]):
+    for line in _quality_lines(r["quality_estimate"], r.get("retake")):
         print(line)
     if r.get("head_codes_unread"):
         print("warning: the two small codes beside the sheet's QR code (the scene's own decoder head) could not be "

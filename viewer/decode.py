@@ -173,7 +173,7 @@ def read_photos(paths) -> tuple:
     combined = combine_captures(np.stack([g[1] for g in got]), w)
     photos = [{"photo": n, "weight": round(float(wi), 4), "pilot_gain": round(g, 4) if np.isfinite(g) else None,
                "pilot_noise": float(f"{np.mean(r * r):.4g}") if np.all(np.isfinite(r)) else None,
-               "qr_read": gi[0].qr is not None, "head_read": _head_read(gi[0].qr)}
+               "qr_read": gi[0].qr is not None, "head_read": _head_read(gi[0].qr), "photo_check": gi[0].photo}
               for n, wi, (g, r), gi in zip(names, w, reads, got)]
     return got[int(np.argmax(w))][0], combined, meta, f"{len(paths)} photos of a sheet, combined", photos
 
@@ -268,8 +268,12 @@ def _scene(path, cfg: RenderConfig):
         "render": cfg.__dict__,
         "field_evaluations": baked.evaluated,
         "scan": None if res is None else {k: v for k, v in res.report().items()
-                                          if k in ("corners", "reprojection_px", "qr")},
+                                          if k in ("corners", "reprojection_px", "qr", "photo")},
     }
+    # what to change when the photo is taken again (the photo check's measures over their limits; for several
+    # photos, the one with the largest weight's)
+    from snapshot3d.scanner.photo_check import PhotoCheck
+    report["retake"] = PhotoCheck(**res.photo).causes() if res is not None and res.photo else []
     if photos is not None:   # several photos: the scan above is the one with the largest weight
         report["photos"] = photos
     px = None if res is None else px_per_pixel(res.corners)

@@ -47,7 +47,7 @@ def add_commands(sub) -> None:
     c.add_argument("-o", "--output", required=True, help="rectified, colour-corrected 380x380 snapshot (.png)")
     c.add_argument("--debug", help="write an overlay of the detections on the photo here (.png or .jpg)")
     c.add_argument("--report", help="write a JSON report here (detected, corners, reprojection_px, confidence, "
-                                    "qr, timings_ms)")
+                                    "qr, photo: tilt, blur and glare, timings_ms)")
 
     k = _add(sub, "calibrate", "measure a printer and phone from a photo of the calibration chart (numpy + OpenCV)",
              _run("snapshot3d.scanner.calibrate", "calibrate_command"))

@@ -93,13 +93,18 @@
     state.ready = true;
   }
 
+  // what the photo check found wrong with the photo (glare, tilt, blur), or the general advice
+  function retakeAdvice(retake) {
+    return retake && retake.length ? retake.join("; ") : "retake the photo square on, in focus, in even light";
+  }
+
   function showReport(body) {
     const q = body.report.quality_estimate || {};
     const el = $("quality");
     el.hidden = false;
     if (q.restore_psnr_expected_db != null) {
       el.textContent = `Expected quality: about ${q.restore_psnr_expected_db.toFixed(1)} dB` +
-        (q.restore_psnr_expected_db < 22 ? " (poor: retake the photo square on, in focus, in even light)" : "");
+        (q.restore_psnr_expected_db < 22 ? ` (poor: ${retakeAdvice(body.report.retake)})` : "");
       el.classList.toggle("poor", q.restore_psnr_expected_db < 22);
     } else {
       el.textContent = "Expected quality: no estimate for this kind of input.";
