@@ -8,8 +8,9 @@ blur and the glare, so that a poor decode can say what to change when the photo 
   a Gaussian blur of that rise;
 - **glare**: the share of the snapshot's area brighter than the bare paper around it (the scanner's flat field):
   light that the print's inks and paper cannot reflect diffusely, a highlight or a veil over its light parts.
-`snapshot3d bench print-ablation` says what each costs a `moderate` photo: glare and the tilt about 1 dB of
-restore_psnr each, the blur 0.6-1.2 (docs/print-codec.md)."""
+`snapshot3d bench print-ablation` says what each costs a `moderate` photo: glare 1.1-1.4 dB of restore_psnr, the
+blur 0.6-1.2, a tilt under 30 degrees 0.3-0.5 (docs/print-codec.md); and how well the check reads them
+(docs/scanner.md)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -245,6 +245,20 @@ def add_commands(sub) -> None:
     bb.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
     _quick(bb, hosts="coffee", heldout=0, severities="moderate", prints=1, photos=2, views=1)
 
+    ba = add(bsub, "print-ablation", "where a physical severity's error comes from: each photo again with one knob of its "
+                                     "preset at its ideal (light, halftone, tilt, blur, sensor, JPEG, white balance, "
+                                     "the print alone) and with an oracle flat field; paired gains in restore and e2e",
+             _run("snapshot3d.bench.print_ablation", "bench_print_ablation_command"))
+    _out(ba)
+    ba.add_argument("--scene", default="bench/models/spot-print-head-refit.s3d", help="scene file (fitted for print)")
+    ba.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos")
+    ba.add_argument("--heldout", type=int, default=0, help="also this many held-out host photos (../shared)")
+    ba.add_argument("--severity", default="moderate", help="one physical severity")
+    ba.add_argument("--seeds", type=int, default=6, help="photos per host")
+    ba.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
+    ba.add_argument("--size", type=int, default=96, help="orbit view size for restore_psnr")
+    _quick(ba, hosts="coffee", heldout=0, seeds=1, views=1, size=48)
+
     bs = add(bsub, "decoder-search", "candidate shared decoders scored by what they fit: spot and lego at small "
                                      "plane sizes, field_psnr clean and with plane noise (JSON lines; for a GPU)",
              _run("snapshot3d.bench.decoder_search", "bench_decoder_search_command"))
