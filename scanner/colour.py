@@ -18,8 +18,8 @@ from snapshot3d import formats
 
 from . import layout
 
-__all__ = ["srgb_decode", "srgb_encode", "paper_mask", "fit_colour", "flat_field", "apply_colour", "marker_contrast",
-           "linear_lut", "linear_to_srgb_u8"]
+__all__ = ["srgb_decode", "srgb_encode", "paper_mask", "fit_colour", "flat_field", "apply_colour", "colour_flat",
+           "marker_contrast", "linear_lut", "linear_to_srgb_u8"]
 
 _GREYS = (0, 1, 2, 3, 4, 5)  # indices of white, black and greys in formats.PATCH_COLOURS
 
@@ -139,7 +139,12 @@ def flat_field(model: dict, region_lin: np.ndarray, box: tuple) -> np.ndarray:
 def apply_colour(model: dict, region_lin: np.ndarray, box: tuple) -> np.ndarray:
     """Correct a region of the rectified sheet: region_lin (h, w, 3) float32 RGB linear at one pixel per
     layout unit, covering layout box (x0, y0, x1, y1). Returns (h, w, 3) uint8 sRGB RGB."""
-    flat = flat_field(model, region_lin, box)
+    return colour_flat(model, flat_field(model, region_lin, box))
+
+
+def colour_flat(model: dict, flat: np.ndarray) -> np.ndarray:
+    """`apply_colour` of a region already over the paper's level (`flat_field`): tone and colour, (h, w, 3) uint8
+    sRGB RGB."""
     toned = np.stack([np.interp(flat[..., c], *model["curves"][c]) for c in range(3)], -1).astype(np.float32)
     return linear_to_srgb_u8(toned @ model["matrix"].astype(np.float32))
 

@@ -19,7 +19,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.head import parse_head
 
 from . import layout
-from .colour import apply_colour, fit_colour, flat_field, linear_lut, marker_contrast
+from .colour import colour_flat, fit_colour, flat_field, linear_lut, marker_contrast
 from .detect import detect_markers, make_detector, refine_corners
 from .diagnose import SHARPNESS_MIN, exposure_problem, sharpness
 from .fit import Fit, fit_geometry
@@ -183,14 +183,15 @@ def scan_image(img: np.ndarray, chart: bool = False) -> ScanResult:
     model = fit_colour(lo)
     n = formats.SNAPSHOT_SIZE
     sx0, sy0 = formats.SHEET_BOX[:2]
-    snapshot = apply_colour(model, lo[-sy0:-sy0 + n, -sx0:-sx0 + n], (0, 0, n, n))
+    flat = flat_field(model, lo[-sy0:-sy0 + n, -sx0:-sx0 + n], (0, 0, n, n))   # 1: the paper's level
+    snapshot = colour_flat(model, flat)
     pilot = pilot_psnr(lo, model, mids)
     t["colour"] = (time.perf_counter() - t1) * 1e3
     t1 = time.perf_counter()
     qr = _read_qr(hi, img, fit, chart)
     t["qr"] = (time.perf_counter() - t1) * 1e3
     t1 = time.perf_counter()
-    photo = check_photo(img, fit, mids, flat_field(model, lo[-sy0:-sy0 + n, -sx0:-sx0 + n], (0, 0, n, n)))
+    photo = check_photo(img, fit, mids, flat)
     t["check"] = (time.perf_counter() - t1) * 1e3
     t["total"] = (time.perf_counter() - t0) * 1e3
     rms_snap = fit.rms_px / photo_px_per_unit(fit)
