@@ -25,6 +25,15 @@ def _through_print_options(p, seeds: int) -> None:
     p.add_argument("--size", type=int, default=96, help="orbit view size for restore_psnr")
 
 
+def _print_scene_options(p, heldout: int) -> None:
+    """--out, and the photos of one print scene of `bench burst` and `bench print-ablation`: scene, hosts, views."""
+    _out(p)
+    p.add_argument("--scene", default="bench/models/spot-print-head-refit.s3d", help="scene file (fitted for print)")
+    p.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos")
+    p.add_argument("--heldout", type=int, default=heldout, help="also this many held-out host photos (../shared)")
+    p.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
+
+
 def _quick(p, **settings) -> None:
     """--quick: a smoke run of the benchmark with `settings` in place of the options given."""
     desc = ", ".join(f"--{k.replace('_', '-')} {v}" for k, v in settings.items())
@@ -235,27 +244,20 @@ def add_commands(sub) -> None:
     bb = add(bsub, "burst", "several photos of one print against one: e2e_psnr of each photo alone, the best by the "
                             "pilots, the captures' mean and their pilot-weighted mean (what decode does with several)",
              _run("snapshot3d.bench.burst", "bench_burst_command"))
-    _out(bb)
-    bb.add_argument("--scene", default="bench/models/spot-print-head-refit.s3d", help="scene file (fitted for print)")
-    bb.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos")
-    bb.add_argument("--heldout", type=int, default=2, help="also this many held-out host photos (../shared)")
+    _print_scene_options(bb, heldout=2)
     bb.add_argument("--severities", default="mild,moderate,severe", help="comma-separated physical severities")
     bb.add_argument("--prints", type=int, default=2, help="prints per host and severity")
     bb.add_argument("--photos", type=int, default=4, help="photos per print (2 to 8)")
-    bb.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
     _quick(bb, hosts="coffee", heldout=0, severities="moderate", prints=1, photos=2, views=1)
 
     ba = add(bsub, "print-ablation", "where a physical severity's error comes from: each photo again with one knob of its "
-                                     "preset at its ideal (light, halftone, tilt, blur, sensor, JPEG, white balance, "
-                                     "the print alone) and with an oracle flat field; paired gains in restore and e2e",
+                                     "preset at its ideal (light, halftone, printer, tilt, blur, sensor, JPEG, white "
+                                     "balance; the print alone, the camera alone) and with an oracle flat field; paired "
+                                     "gains in restore and e2e",
              _run("snapshot3d.bench.print_ablation", "bench_print_ablation_command"))
-    _out(ba)
-    ba.add_argument("--scene", default="bench/models/spot-print-head-refit.s3d", help="scene file (fitted for print)")
-    ba.add_argument("--hosts", default="coffee,chelsea", help="bundled host photos")
-    ba.add_argument("--heldout", type=int, default=0, help="also this many held-out host photos (../shared)")
+    _print_scene_options(ba, heldout=0)
     ba.add_argument("--severity", default="moderate", help="one physical severity")
     ba.add_argument("--seeds", type=int, default=6, help="photos per host")
-    ba.add_argument("--views", type=int, default=5, help="held-out ground-truth views per e2e_psnr")
     ba.add_argument("--size", type=int, default=96, help="orbit view size for restore_psnr")
     _quick(ba, hosts="coffee", heldout=0, seeds=1, views=1, size=48)
 
