@@ -56,7 +56,10 @@ def test_glare_is_light_above_the_papers(sheet):
     from snapshot3d.scanner.scan import scan_image
     lit, truth = _shot(sheet, get_preset("moderate"), 3)
     dark, _ = _shot(sheet, replace(get_preset("moderate"), glare=(0.0, 0.0)), 3)
-    assert truth["sampled"]["glare"] > 0.2 and lit["glare_share"] > 3 * GLARE_MAX and dark["glare_share"] == 0.0
+    # the photo without glare reaches 1.097 of its paper at its brightest, 0.3% under GLARE_LEVEL: a pixel may cross
+    # on another CPU's resampling, so "none" is "a tenth of the share that is named"
+    assert truth["sampled"]["glare"] > 0.2 and lit["glare_share"] > 3 * GLARE_MAX
+    assert dark["glare_share"] <= 0.1 * GLARE_MAX
     assert scan_image(cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR)).photo["glare_share"] == 0.0
 
 
