@@ -7,7 +7,9 @@ against; the channel report's own time (measured again alone on the capture: med
 and `restore_psnr` (decoded views against the reference renderer's, 20 views of 128) beside the quality
 estimate's `restore_psnr_expected_db`.
 The summary counts the nearest preset right per preset, the advice against the simulator's draw (steadier
-where its defocus plus motion passed `viewer.channel.STEADY_PX`, else closer) and the estimate's error.
+where its defocus plus motion passed `viewer.channel.STEADY_PX`, else closer; also for the rule before the photo
+check, the blur the pilots' gain points to) and the estimate's error. Rows carry the photo check's measures
+(`check_blur` in snapshot pixels, `check_glare`, `check_tilt`).
 `--reference` takes seeds 100-105 and prints `viewer.channel.CHANNEL_REFERENCE` (mean and spread of log gain
 and log noise per preset), `BLUR_FIT` and what chose the features (`feature_choice`) instead of scoring; its
 rows go to decode_channel_reference.{csv,json}."""
@@ -52,13 +54,14 @@ def _row(photo: Path, ref: np.ndarray, truth: dict, size: int) -> dict:
     res, snap, meta, _ = read_input(photo)
     _, info = restore_planes(snap, meta)
     px = px_per_pixel(res.corners)
-    s = truth["sampled"]
+    s, check = truth["sampled"], dec.report["scan"]["photo"]
     return {"gain": ch["gain"], "noise": ch["noise"], "snr_db": ch["snr_db"],
             "log_gain": round(math.log(ch["gain"]), 4), "log_noise": round(math.log(ch["noise"]), 4),
             **{f"gain_{b}": v for b, v in ch["band_gain"].items()},
             "nearest": ch["nearest_preset"], "advice": ch["advice"], "px_per_pixel": round(px, 3),
             "defocus_px": round(s["defocus_px"], 3), "motion_px": round(s["motion_px"], 3),
             "blur_snapshot_px": round((s["defocus_px"] + s["motion_px"]) / px, 3),
+            "check_blur": check["blur_px"], "check_glare": check["glare_share"], "check_tilt": check["tilt_deg"],
             "noise_shot": round(s["noise_shot"], 5), "noise_read": round(s["noise_read"], 5),
             "jpeg_quality": s["jpeg_quality"], "channel_ms_in_decode": ch["ms"],
             **dict(zip(("channel_ms", "channel_ms_best"), (round(t, 2) for t in _alone_ms(snap, meta, info, px)))),
@@ -154,7 +157,7 @@ def feature_choice(rows: list[dict]) -> dict:
 
 
 def _summary(rows: list[dict]) -> dict:
-    from snapshot3d.viewer.channel import STEADY_PX
+    from snapshot3d.viewer.channel import STEADY_PX, blur_px
 
     ok = [r for r in rows if "failed" not in r]
     out = {"photos": len(rows), "failed": len(rows) - len(ok),
@@ -172,6 +175,10 @@ def _summary(rows: list[dict]) -> dict:
             # the advice against what the simulator drew: steadier where its defocus plus motion passed STEADY_PX
             "advice_agrees": sum(("steadier" in x["advice"]) == (x["defocus_px"] + x["motion_px"] > STEADY_PX)
                                  for x in r if "nothing" not in x["advice"]),
+            # the rule before the photo check's blur: the blur that the pilots' gain points to
+            "advice_agrees_gain_rule": sum((blur_px(x["gain"], x["px_per_pixel"]) > STEADY_PX) ==
+                                           (x["defocus_px"] + x["motion_px"] > STEADY_PX)
+                                           for x in r if "nothing" not in x["advice"]),
             "estimate_minus_measured_db_median": round(float(np.median(err)), 2) if err else None,
             "estimate_minus_measured_db_max": round(float(np.max(err)), 2) if err else None}
     return out

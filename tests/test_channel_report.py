@@ -92,6 +92,16 @@ def test_advice_follows_the_blur_the_gain_points_to():
     assert "snapshot file" in channel.advice(m, "moderate", None)
 
 
+def test_advice_takes_the_photo_checks_blur_over_the_gains():
+    """Where the photo check read the markers' edges, their blur (snapshot pixels, times the photo's pixels per
+    snapshot pixel) decides: a sharp edge on a large snapshot says closer, whatever the gain points to."""
+    m = {"gain": 0.3, "noise": 8.0}
+    assert 0.1 * 6.0 < channel.STEADY_SIGMA_PX < 0.3 * 6.0
+    assert "closer" in channel.advice(m, "severe", 6.0, edge_blur=0.1)
+    assert "steadier" in channel.advice(m, "severe", 6.0, edge_blur=0.3)
+    assert "steadier" in channel.advice(m, "severe", 6.0, edge_blur=None)   # no edge read: the gain's rule
+
+
 def test_decode_report_json_has_the_channel(tmp_path):
     out = tmp_path / "out"
     proc = run_cli("decode", str(PHOTO), "-o", str(out), "--views", "1", "--size", "32")

@@ -277,7 +277,8 @@ def _scene(path, cfg: RenderConfig):
     if photos is not None:   # several photos: the scan above is the one with the largest weight
         report["photos"] = photos
     px = None if res is None else px_per_pixel(res.corners)
-    channel = lambda: channel_report(meta.codec, snapshot, meta.planes, codec_info, px)  # noqa: E731
+    blur = None if res is None or not res.photo else res.photo["blur_px"]
+    channel = lambda: channel_report(meta.codec, snapshot, meta.planes, codec_info, px, blur)  # noqa: E731
 
     def estimate(views_psnr: float | None) -> dict:
         return quality_estimate(meta.codec, pilot, codec_info.get("plane_rmse_expected"), views_psnr)
