@@ -9,7 +9,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["BACKGROUND_NAMES", "background_names", "load_background", "load_host"]
+__all__ = ["BACKGROUND_NAMES", "MIN_HOST_SIDE", "background_names", "load_background", "load_host"]
+
+MIN_HOST_SIDE = 190
+"""the shortest host photo side `load_host` takes: the 380x380 snapshot enlarges it at most twice (a smaller one
+would be a blur of a few pixels, with no detail to hide the payload in)"""
 
 BACKGROUND_NAMES = ("astronaut", "coffee", "chelsea", "rocket", "camera", "brick", "grass", "gravel", "coins",
                     "moon", "hubble_deep_field", "immunohistochemistry")
@@ -46,7 +50,8 @@ def load_background(name: str) -> np.ndarray:
 
 def load_host(spec: str) -> np.ndarray:
     """A host photo for `embed`: `builtin:NAME` (a bundled photo) or an image file -> (380, 380, 3) float32
-    RGB in [0, 1], the centred square crop resized."""
+    RGB in [0, 1], the centred square crop resized. A UserError for a file whose shorter side is under
+    MIN_HOST_SIDE."""
     from snapshot3d import formats
     from snapshot3d.errors import UserError
     from snapshot3d.images import fit_square
@@ -60,4 +65,10 @@ def load_host(spec: str) -> np.ndarray:
         rgb = load_background(name)
     else:
         rgb = cv2.cvtColor(read_image_bgr(spec, "host photo"), cv2.COLOR_BGR2RGB)
+        h, w = rgb.shape[:2]
+        if min(h, w) < MIN_HOST_SIDE:
+            n = formats.SNAPSHOT_SIZE
+            raise UserError(f"host photo {Path(spec).name} is {w}x{h}: too small to hide a {n}x{n} snapshot in (its "
+                            f"shorter side needs {MIN_HOST_SIDE} px or more; it would be enlarged "
+                            f"{n / min(h, w):.0f} times)")
     return fit_square(rgb, formats.SNAPSHOT_SIZE).astype(np.float32) / 255.0

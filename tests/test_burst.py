@@ -121,7 +121,7 @@ def test_three_photos_of_one_print_restore_better_than_one(photos):
     assert ds.report["source"] == "3 photos of a sheet, combined"
 
 
-def test_a_photo_whose_qr_code_is_unread_joins_one_that_read_it(photos):
+def test_a_photo_whose_qr_code_is_unread_joins_one_that_read_it(photos, tmp_path):
     """The QR code (scene box, plane size, codec) is read once for all; a photo that missed it still counts."""
     from snapshot3d.viewer.decode import decode_scene, read_photos
     paths, _ = photos
@@ -130,7 +130,14 @@ def test_a_photo_whose_qr_code_is_unread_joins_one_that_read_it(photos):
     assert got["inked.jpg"]["qr_read"] is False and got["a.jpg"]["qr_read"] is True
     assert got["inked.jpg"]["weight"] > 0.05
     with pytest.raises(UserError, match="could not read its QR code"):
-        read_photos([paths[4], paths[4]])
+        read_photos([paths[4], _reencoded(paths[4], tmp_path)])
+
+
+def _reencoded(path: Path, folder: Path) -> Path:
+    """The photo at `path` saved again as JPEG in `folder`: the same picture in other bytes."""
+    out = folder / f"again-{path.name}"
+    cv2.imwrite(str(out), cv2.imread(str(path)), [cv2.IMWRITE_JPEG_QUALITY, 97])
+    return out
 
 
 def test_decode_combines_photos_without_torch(photos, tmp_path):
@@ -160,6 +167,12 @@ def test_photos_of_another_print_or_a_snapshot_file_are_refused(photos, tmp_path
         read_photos([paths[0]] * 9)
     with pytest.raises(UserError, match=r"^missing\.jpg: "):
         read_photos([tmp_path / "missing.jpg", paths[0]])
+    copy = tmp_path / "a-copy.jpg"   # one photo twice, or under two names, is refused before any scan
+    copy.write_bytes(paths[0].read_bytes())
+    with pytest.raises(UserError, match=r"^a\.jpg is given twice: give different photos"):
+        read_photos([paths[0], paths[1], paths[0]])
+    with pytest.raises(UserError, match=r"^a-copy\.jpg is a copy of a\.jpg"):
+        read_photos([paths[0], copy])
     snap = tmp_path / "snap.png"
     proc = run_blocked("decode", str(paths[0]), str(paths[3]), "-o", str(tmp_path / "out"))
     assert_one_line_error(proc, "cat.jpg shows another print")

@@ -113,6 +113,10 @@ def test_embed_bad_host_and_output(tmp_path):
                           "--host-psnr must be in [20, 60] dB")
     assert_one_line_error(run("embed", str(SPOT), "--medium", "file", "-o", str(tmp_path / "s.png"), "--host-psnr",
                               "55"), "the file codec keeps at most")
+    small = tmp_path / "small.png"   # a thumbnail would be enlarged past twice: refused, naming its size
+    cv2.imwrite(str(small), np.full((120, 160, 3), 128, np.uint8))
+    assert_one_line_error(run("embed", str(SPOT), "--host", str(small), "-o", str(tmp_path / "s.png")),
+                          "host photo small.png is 160x120: too small")
     assert not (tmp_path / "s.png").exists()
 
 

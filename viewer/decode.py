@@ -134,6 +134,7 @@ def read_photos(paths) -> tuple:
     names = [Path(p).name for p in paths]
     if not 2 <= len(paths) <= MAX_PHOTOS:
         raise UserError(f"give 1 to {MAX_PHOTOS} photos of one printed sheet, not {len(paths)}")
+    _refuse_copies(paths, names)
     def scanned(path, name):
         try:
             res, snapshot, meta, _ = read_input(path, need_qr=False)
@@ -176,6 +177,23 @@ def read_photos(paths) -> tuple:
                "qr_read": gi[0].qr is not None, "head_read": _head_read(gi[0].qr), "photo_check": gi[0].photo}
               for n, wi, (g, r), gi in zip(names, w, reads, got)]
     return got[int(np.argmax(w))][0], combined, meta, f"{len(paths)} photos of a sheet, combined", photos
+
+
+def _refuse_copies(paths, names: list[str]) -> None:
+    """A UserError naming the first photo given twice (the same bytes, under its own or another name): a copy adds
+    nothing to the combination. A file that cannot be read is left to the scan's own error."""
+    import hashlib
+
+    seen = {}
+    for path, name in zip(paths, names):
+        try:
+            digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        except OSError:
+            continue
+        if digest in seen:
+            same = "is given twice" if seen[digest] == name else f"is a copy of {seen[digest]}"
+            raise UserError(f"{name} {same}: give different photos of one printed sheet (a copy adds nothing)")
+        seen[digest] = name
 
 
 def _head_read(qr: dict | None) -> bool | None:
