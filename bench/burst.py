@@ -156,11 +156,10 @@ def _side_by_side(kept: dict, e2e, scene, path: Path, photos: int) -> None:
 
 def bench_burst_command(args) -> int:
     from snapshot3d.scanner.sheet import render_sheet
-
-    from .codec_print import E2E, _snapshot, heldout_hosts
-
     from snapshot3d.validate import integer
     from snapshot3d.viewer.burst import MAX_PHOTOS
+
+    from .codec_print import E2E, _snapshot, heldout_hosts
 
     integer(args.photos, "--photos", 2, MAX_PHOTOS)
     integer(args.prints, "--prints", 1, 100)

@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 
 from snapshot3d import formats, validate
-from snapshot3d.head import HEAD_KEY, parse_head
 from snapshot3d.codecs.media import CODEC_MEDIUM, MEDIA
 from snapshot3d.errors import UserError
+from snapshot3d.head import HEAD_KEY, parse_head
 
 __all__ = ["SheetMeta", "encode_payload", "decode_payload", "qr_matrix", "read_qr", "check_codec", "check_meta",
            "scene_meta", "MAX_PAYLOAD"]

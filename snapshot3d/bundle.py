@@ -99,7 +99,7 @@ def adjust_poses(c2w: np.ndarray, intrinsics: np.ndarray, track: np.ndarray, fra
     pose moves by a turn (a rotation vector, applied after the given rotation: small, far from the rotation
     vector's wrap at 180 degrees) and a shift of its world-to-camera transform."""
     c2w = np.asarray(c2w, np.float64)
-    n, m = len(c2w), int(track.max()) + 1 if len(track) else 0
+    m = int(track.max()) + 1 if len(track) else 0
     if m < cfg.min_tracks:
         return c2w, {"tracks": m, "adjusted": False}
     w2c = OPENCV_TO_OPENGL @ np.linalg.inv(c2w)   # the flip is its own inverse

@@ -222,7 +222,7 @@ def test_the_server_combines_several_uploads_and_refuses_another_print(photos, t
     assert not any(list(p.iterdir()) for p in cache.glob(".uploads.*"))   # no upload left behind
 
 
-def test_the_page_sends_several_photos_of_one_print(photos, browser, base_url):
+def test_the_page_sends_several_photos_of_one_print(photos, browser, base_url):  # noqa: F811 (the imported fixtures)
     paths, _ = photos
     page, errors = _page(browser, base_url)
     page.set_input_files("#photo", [str(p) for p in paths[:2]])

@@ -25,12 +25,12 @@ from snapshot3d.export.parity import (
     restore_parity,
     torch_field_models,
 )
+from snapshot3d.head import encode_head
 from snapshot3d.train.codec.hinet import load_codec
 from snapshot3d.train.field.decoder import load_decoder
 from snapshot3d.train.field.field import decode, sample_planes
-from snapshot3d.viewer.bake import cell_coords, grid_field
-from snapshot3d.head import encode_head
 from snapshot3d.train.field.head import with_head
+from snapshot3d.viewer.bake import cell_coords, grid_field
 from snapshot3d.viewer.runtime import FieldModels, own_head
 
 

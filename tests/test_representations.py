@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 import torch
-
 from helpers import assert_one_line_error, run_cli
+
 from snapshot3d.errors import UserError
 from snapshot3d.train.field.representations import KINDS, build_field, carried_bytes, quantize_st, size_for_budget
 
