@@ -30,6 +30,9 @@ _FORMATS = ("JPEG", "MPO", "PNG", "WEBP", "BMP", "TIFF")   # what OpenCV decodes
 _MAGIC = ((b"\xff\xd8", "JPEG"), (b"\x89PNG", "PNG"), (b"GIF8", "GIF"), (b"BM", "BMP"), (b"RIFF", "WebP"),
           (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"))
 _JPEG_MARKER = re.compile(rb"\xff[^\x00\xd0-\xd7\xff]")
+_HEIF_BRANDS = {b"heic", b"heix", b"hevc", b"hevx", b"heim", b"heis", b"hevm", b"hevs", b"mif1", b"msf1", b"avif",
+                b"avis"}
+"""ISO base media brands of HEIF and AVIF stills (bytes 8-12, after "ftyp"): an iPhone's default photo format"""
 
 
 def image_size(path, what: str = "photo") -> tuple[int, int, str]:
@@ -56,7 +59,10 @@ def image_size(path, what: str = "photo") -> tuple[int, int, str]:
             with Image.open(path) as im:
                 w, h, fmt = im.size[0], im.size[1], im.format or "?"
     except Image.UnidentifiedImageError:
-        head = path.open("rb").read(8)
+        head = path.open("rb").read(12)
+        if head[4:8] == b"ftyp" and head[8:12] in _HEIF_BRANDS:
+            raise UserError(f"{path.name} is a HEIF/HEIC or AVIF photo, which is not read here: save it as JPEG (on an "
+                            f"iPhone, Settings > Camera > Formats > Most Compatible)") from None
         for magic, kind in _MAGIC:
             if head.startswith(magic):
                 raise UserError(f"{path.name} is a corrupt {kind} file (unreadable header)") from None

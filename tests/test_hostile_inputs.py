@@ -286,6 +286,11 @@ def test_image_readers_refuse_formats_and_sizes_from_the_header(tmp_path):
     Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(gif)
     with pytest.raises(UserError, match="GIF image; give a JPEG or PNG"):
         read_image_bgr(gif)
+    heic = tmp_path / "IMG_0001.HEIC"   # an iPhone's default photo: its box header, named in the message
+    heic.write_bytes(b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00mif1heic" + bytes(200))
+    with pytest.raises(UserError, match=r"^IMG_0001\.HEIC is a HEIF/HEIC or AVIF photo, which is not read here: save "
+                                        r"it as JPEG"):
+        read_image_bgr(heic)
     with pytest.raises(UserError, match="over the 120 MP limit"):
         validate.check_image_size(20000, 20000, "x.png")
 
