@@ -7,17 +7,17 @@ from pathlib import Path
 import pytest
 
 RESULTS = Path(__file__).resolve().parents[1] / "bench" / "results"
-FILES = sorted(RESULTS.glob("*.json"))
+FILES = sorted(p for p in RESULTS.rglob("*.json") if "quick" not in p.relative_to(RESULTS).parts[:-1])  # not smoke runs
 
 
 def test_there_are_results():
     assert len(FILES) >= 15, [p.name for p in FILES]
 
 
-@pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
+@pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(RESULTS)))
 def test_results_record_their_run(path):
     meta = json.loads(path.read_text()).get("meta")
-    assert isinstance(meta, dict), f"{path.name} has no 'meta' entry"
+    assert isinstance(meta, dict), f"{path.relative_to(RESULTS)} has no 'meta' entry"
     assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", meta.get("date", "")), meta.get("date")
     assert re.fullmatch(r"[0-9a-f]{7,40}(\+dirty)?|unknown", meta.get("commit", "")), meta.get("commit")
     backfilled = bool(meta.get("backfilled"))  # written before runs recorded it: the file's last commit
