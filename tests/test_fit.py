@@ -19,10 +19,16 @@ def tiny():
     return builtin_scene("procedural", n_train=24, n_test=4, size=48, seed=1)
 
 
-def test_short_fit_raises_psnr_by_6db(tiny):
+@pytest.fixture(scope="module")
+def plain(tiny):
+    """The plain 150-step fit, shared by the tests that score it and that resume to it."""
+    return fit(tiny, load_decoder(), CFG)
+
+
+def test_short_fit_raises_psnr_by_6db(tiny, plain):
     dec = load_decoder()
     before = evaluate_planes(TriPlanes(32, 4, seed=0).planes.detach().numpy(), dec, tiny)["field_psnr"]
-    res = fit(tiny, dec, CFG)
+    res = plain
     after = evaluate_planes(dequantize_planes(res.codes), dec, tiny)
     assert after["field_psnr"] > before + 6.0, (before, after["field_psnr"])
     assert after["field_ssim"] > 0.8
@@ -31,16 +37,15 @@ def test_short_fit_raises_psnr_by_6db(tiny):
     assert res.codes.shape == (3, 4, 32, 32) and res.codes.dtype == np.uint8
 
 
-def test_resume_continues_to_the_same_result(tiny, tmp_path):
+def test_resume_continues_to_the_same_result(tiny, plain, tmp_path):
     dec = load_decoder()
-    full = fit(tiny, dec, CFG)
     ckpt = tmp_path / "run.ckpt"
-    with pytest.raises(_Stop):  # a run killed at step 100; its last checkpoint is from step 50
-        fit(tiny, dec, CFG, checkpoint=ckpt, progress=_stop_at(100))
+    with pytest.raises(_Stop):  # a run killed at step 75 (progress comes every 25); its last checkpoint is from step 50
+        fit(tiny, dec, CFG, checkpoint=ckpt, progress=_stop_at(75))
     assert torch.load(ckpt, weights_only=False)["step"] == 50
     resumed = fit(tiny, dec, CFG, checkpoint=ckpt)
     assert resumed.state.step == 150
-    assert np.array_equal(resumed.codes, full.codes)
+    assert np.array_equal(resumed.codes, plain.codes)
 
 
 class _Stop(Exception):
@@ -74,6 +79,6 @@ def test_a_scenes_own_head_is_fitted_carried_and_resumed(tiny, tmp_path):
     assert with_own > with_shared + 0.4, (with_own, with_shared)   # measured +0.71 dB
     ckpt = tmp_path / "run.ckpt"
     with pytest.raises(_Stop):
-        fit(tiny, dec, cfg, checkpoint=ckpt, progress=_stop_at(100))
+        fit(tiny, dec, cfg, checkpoint=ckpt, progress=_stop_at(75))
     resumed = fit(tiny, dec, cfg, checkpoint=ckpt)
     assert resumed.head == res.head and np.array_equal(resumed.codes, res.codes)
