@@ -28,13 +28,12 @@ def plain(tiny):
 def test_short_fit_raises_psnr_by_6db(tiny, plain):
     dec = load_decoder()
     before = evaluate_planes(TriPlanes(32, 4, seed=0).planes.detach().numpy(), dec, tiny)["field_psnr"]
-    res = plain
-    after = evaluate_planes(dequantize_planes(res.codes), dec, tiny)
+    after = evaluate_planes(dequantize_planes(plain.codes), dec, tiny)
     assert after["field_psnr"] > before + 6.0, (before, after["field_psnr"])
     assert after["field_ssim"] > 0.8
-    hull, occ = res.state.occ.hull.float().mean(), res.state.occ.occ.float().mean()
+    hull, occ = plain.state.occ.hull.float().mean(), plain.state.occ.occ.float().mean()
     assert hull < 0.85 and occ < 0.8 * hull, ("the hull and the learned density should have pruned the box", hull, occ)
-    assert res.codes.shape == (3, 4, 32, 32) and res.codes.dtype == np.uint8
+    assert plain.codes.shape == (3, 4, 32, 32) and plain.codes.dtype == np.uint8
 
 
 def test_resume_continues_to_the_same_result(tiny, plain, tmp_path):
@@ -79,6 +78,6 @@ def test_a_scenes_own_head_is_fitted_carried_and_resumed(tiny, tmp_path):
     assert with_own > with_shared + 0.4, (with_own, with_shared)   # measured +0.71 dB
     ckpt = tmp_path / "run.ckpt"
     with pytest.raises(_Stop):
-        fit(tiny, dec, cfg, checkpoint=ckpt, progress=_stop_at(75))
+        fit(tiny, dec, cfg, checkpoint=ckpt, progress=_stop_at(75))   # killed at 75, resumed from step 50
     resumed = fit(tiny, dec, cfg, checkpoint=ckpt)
     assert resumed.head == res.head and np.array_equal(resumed.codes, res.codes)
