@@ -15,25 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from snapshot3d.errors import UserError
-
 __all__ = ["bench_decoder_search_command"]
 
 
 def _decoder(spec: str, device):
     """A shipped version's name (`tri-dec-1`) or a weights file -> (name, frozen Decoder on `device`)."""
     from snapshot3d import formats
-    from snapshot3d.train.field.decoder import load_decoder
-    from snapshot3d.train.field.field import Decoder
+    from snapshot3d.train.field.decoder import read_decoder
 
-    if spec in formats.DECODERS:
-        dec = load_decoder(spec)
-    else:
-        if not Path(spec).is_file():
-            raise UserError(f"decoder weights not found: {spec} (give a file from 'train decoder -o' or one of "
-                            f"{', '.join(formats.DECODERS)})")
-        with np.load(spec) as z:
-            dec = Decoder.from_arrays(dict(z))
+    dec = read_decoder(spec)
+    if spec not in formats.DECODERS:
         spec = Path(spec).stem.removeprefix("decoder-")
     for p in dec.parameters():
         p.requires_grad_(False)

@@ -122,3 +122,32 @@ def test_decoder_training_noise_only_at_the_print_ladders_sizes():
         train_decoder(DecoderConfig(channel_noise=-1.0), Path("unused.npz"))
     with pytest.raises(UserError, match="--channel-noise and --plane-noise must be >= 0"):
         train_decoder(DecoderConfig(channel_noise=float("nan")), Path("unused.npz"))
+
+
+def test_decoder_training_starts_from_given_weights(tmp_path):
+    """`train decoder --init`: the decoder starts as a copy of a shipped version or a weights file; a width or
+    depth other than the config's, a missing file and a file that is not decoder weights are one-line errors,
+    raised before any scene is rendered."""
+    from snapshot3d.bench.decoder_search import _decoder
+    from snapshot3d.train.field.config import DecoderConfig
+    from snapshot3d.train.field.decoder import _init_decoder, decoder_path, load_decoder, train_decoder
+
+    got = _init_decoder(DecoderConfig(init="tri-dec-1", hidden=32))
+    shipped = load_decoder("tri-dec-1")
+    assert all(p.requires_grad for p in got.parameters())
+    assert all(torch.equal(a, b) for a, b in zip(got.state_dict().values(), shipped.state_dict().values()))
+    same = _init_decoder(DecoderConfig(init=str(decoder_path("tri-dec-1")), hidden=32))
+    assert torch.equal(same.l0.weight, shipped.l0.weight)
+    with pytest.raises(UserError, match="^--init tri-dec-1 has width 32 and 2 hidden layers: give --hidden 32 "):
+        train_decoder(DecoderConfig(init="tri-dec-1"), tmp_path / "d.npz")   # the default width is 64
+    with pytest.raises(UserError, match="^--init .*absent.npz: not found"):
+        _init_decoder(DecoderConfig(init=str(tmp_path / "absent.npz")))
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a zip")
+    with pytest.raises(UserError, match="not decoder weights"):
+        _init_decoder(DecoderConfig(init=str(junk)))
+    # the decoder search reads its candidates the same way
+    name, frozen = _decoder(str(decoder_path("tri-dec-1")), "cpu")
+    assert name == "tri-dec-1" and not any(p.requires_grad for p in frozen.parameters())
+    with pytest.raises(UserError, match="^decoder weights .*junk.npz: not decoder weights"):
+        _decoder(str(junk), "cpu")

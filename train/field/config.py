@@ -140,6 +140,8 @@ class DecoderConfig:
                                         "reads get the print channel model's noise per DCT coefficient "
                                         "(channel_fit.py), scaled by a factor drawn uniformly in [0, this]; 0: off")
     lr: float = config_field(3e-3, "decoder Adam learning rate, decayed 10x over the run")
+    init: str = config_field("", "start the decoder from these weights (a shipped version such as tri-dec-2, or a "
+                                 "file from 'train decoder -o'; --hidden and --layers must match it); empty: random")
     size: int = config_field(200, "rendered view size of the training scenes")
     seed: int = config_field(0, "random seed")
 

@@ -22,7 +22,7 @@ from .config import LADDER_PRINT, DecoderConfig, FitConfig
 from .field import Decoder
 from .fit import new_state, train_step
 
-__all__ = ["DecoderConfig", "train_decoder", "load_decoder", "decoder_path", "scene_decoder"]
+__all__ = ["DecoderConfig", "train_decoder", "load_decoder", "read_decoder", "decoder_path", "scene_decoder"]
 
 
 def decoder_path(version: str = formats.DECODER_VERSION) -> Path:
@@ -46,6 +46,29 @@ def scene_decoder(scene) -> Decoder:
     when it has one (`head.with_head`)."""
     from .head import with_head
     return with_head(load_decoder(scene.decoder_version), scene.head)
+
+
+def read_decoder(spec: str, what: str = "decoder weights") -> Decoder:
+    """A trainable Decoder from `spec`: a shipped version's name (`tri-dec-1`) or a weights file from
+    'train decoder -o'; `what` names the option in the one-line errors."""
+    path = decoder_path(spec) if spec in formats.DECODERS else Path(spec)
+    if not path.is_file():
+        raise UserError(f"{what} {spec}: not found (give a file from 'train decoder -o' or one of "
+                        f"{', '.join(formats.DECODERS)})")
+    try:
+        with np.load(path) as z:
+            return Decoder.from_arrays(dict(z))
+    except (OSError, ValueError, KeyError, RuntimeError) as e:
+        raise UserError(f"{what} {spec}: not decoder weights ({type(e).__name__})") from None
+
+
+def _init_decoder(cfg: DecoderConfig) -> Decoder:
+    """A trainable copy of the decoder named by `cfg.init`, whose width and depth must be the config's."""
+    dec = read_decoder(cfg.init, "--init")
+    if (dec.hidden, dec.layers) != (cfg.hidden, cfg.layers):
+        raise UserError(f"--init {cfg.init} has width {dec.hidden} and {dec.layers} hidden layers: give --hidden "
+                        f"{dec.hidden} --layers {dec.layers}")
+    return dec
 
 
 def _channel_noise_fn(cfg: DecoderConfig, res: int, channels: int, responses: dict, gen: torch.Generator, device):
@@ -78,9 +101,9 @@ def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None,
     names = [n if len(cfg.plane_res) == 1 else f"{n}@{r}" for n, r in runs]
     per_scene = math.ceil(cfg.steps / len(runs))
     fcfgs = [FitConfig(plane_res=r, plane_channels=formats.C_MAX, steps=per_scene, seed=cfg.seed) for _, r in runs]
+    dec = (_init_decoder(cfg) if cfg.init else Decoder(hidden=cfg.hidden, layers=cfg.layers)).to(device or "cpu")
     posed = {n: load_scene(f"builtin:{n}", size=cfg.size) for n in cfg.scenes}
     states = [new_state(posed[n], fc, device=device) for (n, _), fc in zip(runs, fcfgs)]
-    dec = Decoder(hidden=cfg.hidden, layers=cfg.layers).to(device or "cpu")
     opt = torch.optim.Adam(dec.parameters(), lr=cfg.lr)
     step0, t_start, hist, responses = 0, time.perf_counter(), {n: [] for n in names}, {}
     if checkpoint is not None and checkpoint.is_file():
