@@ -94,6 +94,7 @@ def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None,
 
     if not (cfg.channel_noise >= 0 and cfg.plane_noise >= 0):   # NaN too
         raise UserError("--channel-noise and --plane-noise must be >= 0")
+    init = _init_decoder(cfg) if cfg.init else None   # checked before anything is written, and before the seed
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -101,9 +102,9 @@ def train_decoder(cfg: DecoderConfig, out: Path, checkpoint: Path | None = None,
     names = [n if len(cfg.plane_res) == 1 else f"{n}@{r}" for n, r in runs]
     per_scene = math.ceil(cfg.steps / len(runs))
     fcfgs = [FitConfig(plane_res=r, plane_channels=formats.C_MAX, steps=per_scene, seed=cfg.seed) for _, r in runs]
-    dec = (_init_decoder(cfg) if cfg.init else Decoder(hidden=cfg.hidden, layers=cfg.layers)).to(device or "cpu")
     posed = {n: load_scene(f"builtin:{n}", size=cfg.size) for n in cfg.scenes}
     states = [new_state(posed[n], fc, device=device) for (n, _), fc in zip(runs, fcfgs)]
+    dec = (init if init is not None else Decoder(hidden=cfg.hidden, layers=cfg.layers)).to(device or "cpu")
     opt = torch.optim.Adam(dec.parameters(), lr=cfg.lr)
     step0, t_start, hist, responses = 0, time.perf_counter(), {n: [] for n in names}, {}
     if checkpoint is not None and checkpoint.is_file():
