@@ -21,14 +21,12 @@ __all__ = ["bench_decoder_search_command"]
 def _decoder(spec: str, device):
     """A shipped version's name (`tri-dec-1`) or a weights file -> (name, frozen Decoder on `device`)."""
     from snapshot3d import formats
-    from snapshot3d.train.field.decoder import read_decoder
+    from snapshot3d.train.field.decoder import frozen, read_decoder
 
-    dec = read_decoder(spec)
+    dec = frozen(read_decoder(spec))
     if spec not in formats.DECODERS:
         spec = Path(spec).stem.removeprefix("decoder-")
-    for p in dec.parameters():
-        p.requires_grad_(False)
-    return spec, dec.to(device).eval()
+    return spec, dec.to(device)
 
 
 def _print_score(planes: np.ndarray, dec, posed, res: int, channels: int) -> dict:

@@ -22,7 +22,7 @@ from .config import LADDER_PRINT, DecoderConfig, FitConfig
 from .field import Decoder
 from .fit import new_state, train_step
 
-__all__ = ["DecoderConfig", "train_decoder", "load_decoder", "read_decoder", "decoder_path", "scene_decoder"]
+__all__ = ["DecoderConfig", "train_decoder", "load_decoder", "read_decoder", "frozen", "decoder_path", "scene_decoder"]
 
 
 def decoder_path(version: str = formats.DECODER_VERSION) -> Path:
@@ -33,8 +33,11 @@ def load_decoder(version: str = formats.DECODER_VERSION) -> Decoder:
     path = decoder_path(version)
     if not path.is_file():
         raise UserError(f"decoder {version} is not installed ({path}); run 'snapshot3d train decoder'")
-    with np.load(path) as z:
-        dec = Decoder.from_arrays(dict(z))
+    return frozen(read_decoder(str(path)))
+
+
+def frozen(dec: Decoder) -> Decoder:
+    """`dec` in eval mode with no parameter requiring a gradient (in place)."""
     dec.eval()
     for p in dec.parameters():
         p.requires_grad_(False)
