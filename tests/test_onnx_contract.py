@@ -48,6 +48,12 @@ CODE_FLIP_SHARE = 1e-3
 # and exp take other SIMD paths on other CPUs (AVX-512) and may differ in the last bit, which cast to float32 moves
 # a value by at most one float32 step (1.2e-7 of it): compare with 1e-6 of the value.
 INPUT_RTOL, INPUT_ATOL = 1e-6, 1e-9
+# The scan of the example photo (print_capture) goes through OpenCV's homography fit and warps. OpenCV 5.1.0's
+# least-squares cv2.findHomography differs from 5.0.0's by 3e-5 px on the sheet, which flips 0.12% of the
+# capture's codes by one and 9 of them by 2-18 (dark pixels where the scan's tone curve is steep). At most 0.5% of
+# the codes may differ, at most 0.01% (43 of 433,200) by more than one; the planes read from it are held to 0.01,
+# the reading's noise powers to 1e-3 of themselves.
+CAPTURE_FLIP_SHARE, CAPTURE_JUMP_SHARE = 5e-3, 1e-4
 
 
 def _close(got, want, rtol=RTOL, atol=ATOL) -> bool:
@@ -57,6 +63,12 @@ def _close(got, want, rtol=RTOL, atol=ATOL) -> bool:
     if np.any(want != 0):
         assert not np.all(np.abs(want * 1.01 - want) <= atol + rtol * np.abs(want)), "tolerance too loose for them"
     return bool(np.all(np.abs(got - want) <= atol + rtol * np.abs(want)))
+
+
+def _capture_flips_ok(codes, want_codes) -> bool:
+    """The scan's codes: at most CAPTURE_FLIP_SHARE differ, at most CAPTURE_JUMP_SHARE by more than one."""
+    d = np.abs(np.asarray(codes, int) - np.asarray(want_codes, int))
+    return np.mean(d > 0) <= CAPTURE_FLIP_SHARE and np.mean(d > 1) <= CAPTURE_JUMP_SHARE
 
 
 def _code_flips_ok(codes, want_codes) -> bool:
@@ -217,16 +229,16 @@ def test_vectors_are_the_product_path(vectors):
     fresh.update(render_vectors(models, vectors["planes"]))
     code = lambda x: np.round((np.clip(x.astype(np.float32), -1, 1) + 1) / 2 * 255).astype(int)  # noqa: E731
     for k, v in vectors.items():
-        if k == "print_capture":   # the scan of a photo: OpenCV's warps may round a rare pixel the other way elsewhere
-            assert _code_flips_ok(fresh[k], v), (k, int((fresh[k] != v).sum()))
+        if k == "print_capture":   # the scan of a photo: another OpenCV may fit and warp it a hair differently
+            assert _capture_flips_ok(fresh[k], v), (k, int((fresh[k] != v).sum()))
         elif k == "print_planes":  # read from that capture: 0.1% of its values one code off moved them by 2.7e-3
             assert np.abs(fresh[k] - v).max() <= 0.01, (k, np.abs(fresh[k] - v).max())
         elif k == "planes":
             assert _code_flips_ok(code(fresh[k]), code(v)), (k, int((code(fresh[k]) != code(v)).sum()))
         elif k == "restore_secret":
             assert _close(fresh[k], v, SECRET_RTOL, SECRET_ATOL), k
-        elif k == "print_reading":
-            assert _close(fresh[k], v, atol=0), k
+        elif k == "print_reading":  # read from that capture too: OpenCV 5.1's moved it by 1.5e-4 of itself
+            assert _close(fresh[k], v, rtol=1e-3, atol=0), (k, np.abs(fresh[k] / v - 1).max())
         elif k == "mark_dither":   # numpy's PCG64 draws: the same bits on every CPU
             assert np.array_equal(fresh[k], v), k
         elif v.dtype.kind == "f" and (k == "project_interp" or k.startswith("print_")):   # inputs numpy makes
