@@ -50,12 +50,12 @@ def bench_decoder_search_command(args) -> int:
     from snapshot3d.train.field.fit import fit, hull_grid
 
     from .common import run_metadata
-    from .fit import _load
+    from .scenes import load_bench_scene
 
     device = resolve_device(args.device)
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",") if s]
     decoders = [_decoder(s, device) for s in args.decoders.split(",") if s]
-    scenes = {s: _load(s) for s in ("spot", "lego")}
+    scenes = {s: load_bench_scene(s) for s in ("spot", "lego")}
     hulls = {s: hull_grid(posed) for s, (posed, _) in scenes.items()}
     out = Path(args.out_file)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -14,36 +14,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from snapshot3d.builtin import shared_data_dir
 from snapshot3d.errors import UserError
 from snapshot3d.scene import Orbit, Scene, dequantize_planes
-from snapshot3d.train.field.config import LADDER, FitConfig
+from snapshot3d.train.field.config import LADDER
 from snapshot3d.train.field.decoder import load_decoder
 from snapshot3d.train.field.evaluate import evaluate_planes
 from snapshot3d.train.field.fit import fit, hull_grid
 
 from .common import pyplot, run_metadata
+from .scenes import BENCH_SCENES, load_bench_scene
 
 __all__ = ["bench_fit_command", "BENCH_SCENES"]
-
-# name: (scene spec relative to ../shared/data or builtin, loader kwargs, fit config of the size sweep,
-#        step counts of the time sweep besides the size sweep's R64 C8 point)
-BENCH_SCENES = {
-    "spot": ("builtin:spot", {"size": 200}, FitConfig(), (300, 750)),
-    "lego": ("scenes/lego_subset", {"downscale": 4}, FitConfig(), (300, 750, 3000)),  # 20 views: 3000 steps pays
-}
-
-
-def _load(name):
-    from snapshot3d.loaders import load_scene
-    spec, kw, cfg, _ = BENCH_SCENES[name]
-    if not spec.startswith("builtin:"):
-        root = shared_data_dir()
-        if root is None:
-            raise UserError(f"bench fit needs ../shared/data for {name} (not found)")
-        spec = str(root / spec)
-    return load_scene(spec, **kw), cfg
-
 
 def _run_fit(posed, dec, cfg, hull):
     t0 = time.perf_counter()
@@ -60,7 +41,7 @@ def _run_fit(posed, dec, cfg, hull):
 
 def bench_scene(name: str, quick: bool, save) -> None:
     """Runs the sweeps of one scene, handing each result row to `save`."""
-    posed, base = _load(name)
+    posed, base = load_bench_scene(name)
     dec = load_decoder()
     hull = hull_grid(posed)
     scale = 0.1 if quick else 1.0

@@ -18,7 +18,7 @@ from pathlib import Path
 from snapshot3d.errors import UserError
 
 from .common import RowBlocks, pyplot, write_report
-from .fit import _load
+from .scenes import BENCH_SCENES, load_bench_scene
 
 __all__ = ["bench_representations_command"]
 
@@ -26,7 +26,7 @@ __all__ = ["bench_representations_command"]
 @lru_cache(maxsize=1)
 def _scene(name: str):
     """The bench scene `name` as `bench fit` loads it, once for all the rows of a scene."""
-    return _load(name)[0]
+    return load_bench_scene(name)[0]
 
 
 def _rows(args, scene: str, kind: str, kb: float) -> list[dict]:
@@ -115,8 +115,9 @@ def _merge(out: Path, name: str) -> tuple[list[dict], list[str]]:
 
 
 def _checked(args) -> tuple[list[float], list[str], list[str]]:
-    """The budgets (kB), kinds and scenes asked for; UserError naming the first option that is wrong."""
-    from .fit import BENCH_SCENES
+    """The budgets (kB), kinds and scenes asked for; UserError naming the first option that is wrong (an unknown
+    kind, or a budget too small for one, included: before anything is fitted or loaded)."""
+    from snapshot3d.train.field.rep_sizes import size_for_budget
 
     try:
         budgets = [float(x) for x in args.budgets_kb.split(",") if x]
@@ -133,6 +134,9 @@ def _checked(args) -> tuple[list[float], list[str], list[str]]:
             raise UserError(f"{opt} must be >= {least}, not {value}")
     if not (budgets and kinds and scenes) or not all(b > 0 for b in budgets):
         raise UserError("--budgets-kb, --kinds and --scenes must each name at least one, budgets above 0")
+    for kind in kinds:
+        for kb in budgets:
+            size_for_budget(kind, int(kb * 1000))
     return budgets, kinds, scenes
 
 
@@ -146,10 +150,6 @@ def bench_representations_command(args) -> int:
     if args.merge:
         rows, parts = _merge(out, name)
     else:
-        from snapshot3d.train.field.representations import size_for_budget
-        for kind in kinds:
-            for kb in budgets:
-                size_for_budget(kind, int(kb * 1000))   # refuse an unknown kind or a budget too small, before fitting
         blocks = RowBlocks(out / f".{name}.partial.jsonl",
                            {"scenes": scenes, "kinds": kinds, "budgets": budgets, "steps": args.rep_steps,
                             "rays": args.rep_rays, "views": args.rep_views, "device": args.device})
