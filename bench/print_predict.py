@@ -92,8 +92,11 @@ def bench_print_predict_command(args) -> int:
         "channel": {"gain": channel.gain, "unit": channel.unit}, "scenes": summary,
         "max_abs_error_db": max(errors), "curve_max_abs_error_db": max(abs(s["curve_error_db"]) for s in summary.values())})
     if not args.quick:
+        from snapshot3d.train.field.channel_fit import write_stored_responses
+        from snapshot3d.train.field.curves import print_channel
         write_channel(channel, args.severity, "snapshot3d bench print-predict (medians over "
                       f"{len(caps)} {args.severity} captures of {len(scenes)} scenes in {len(hosts)} hosts)")
+        print(f"wrote {write_stored_responses(print_channel())}")   # as fitting reads it back (rounded)
     _chart(out / "print_predict.png", summary, doc)
     return 0
 

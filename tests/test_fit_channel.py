@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 import torch
 
-from snapshot3d.codecs.print_channel import predicted_planes
+from snapshot3d.codecs.print_channel import ChannelModel, predicted_planes
 from snapshot3d.codecs.print_source import plane_dct, random_planes
 from snapshot3d.errors import UserError
 from snapshot3d.scanner.backgrounds import load_host
 from snapshot3d.train.field.budget import print_channel
-from snapshot3d.train.field.channel_fit import channel_response, dct_matrix, through_channel
+from snapshot3d.train.field.channel_fit import channel_response, dct_matrix, stored_responses, through_channel
 from snapshot3d.train.field.config import FitConfig, check_fit_config
 
 
@@ -20,6 +20,24 @@ def test_dct_matrix_is_the_codecs_dct_and_a_clean_channel_is_identity():
     assert np.allclose(coef.ravel(), plane_dct(x), atol=1e-5)
     same = through_channel(torch.from_numpy(x), d, torch.ones(16, 16), torch.zeros(16, 16))
     assert np.allclose(same.numpy(), x, atol=1e-5)
+
+
+def test_the_shipped_responses_are_what_the_channel_gives_now():
+    """The responses shipped for the print ladder (channel-responses.npz) are the ones measured now at the
+    smallest rung, through budget-curves.json's channel; another channel is measured, not read. After a change to
+    the print codec or its channel, write them again: `channel_fit.write_stored_responses(print_channel())`
+    (`bench print-predict` does)."""
+    from snapshot3d.train.field.config import LADDER_PRINT
+    from snapshot3d.train.field.curves import PREDICT_HOSTS
+
+    channel = print_channel()
+    assert all(stored_responses(r, c, channel) is not None for r, c in LADDER_PRINT)
+    a, s = stored_responses(16, 4, channel)
+    fresh_a, fresh_s = channel_response(16, 4, channel, PREDICT_HOSTS)
+    assert np.allclose(a, fresh_a, rtol=1e-4, atol=1e-6) and np.allclose(s, fresh_s, rtol=1e-4, atol=1e-6), \
+        (np.abs(a - fresh_a).max(), np.abs(s - fresh_s).max())
+    assert stored_responses(16, 4, ChannelModel(channel.gain, channel.unit * 2)) is None
+    assert stored_responses(20, 4, channel) is None
 
 
 def test_response_reproduces_the_channel_models_error():

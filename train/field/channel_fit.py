@@ -7,7 +7,9 @@ print and its capture restore `a_k * x_k + s_k * n` with n ~ N(0, 1): `a_k` the 
 regression over simulations of the channel's model (`print_channel.predicted_planes`, the model that
 `fit --budget auto --medium print` predicts with) on planes drawn from the codec's prior spectrum, in
 the bundled hosts `curves.PREDICT_HOSTS`. `through_channel` applies them in torch (the DCT as a matrix
-product). The fit uses the noise alone unless `FitConfig.channel_gain`: with the gain, the fit boosts the
+product). The responses at the print ladder's sizes for the channel of budget-curves.json are shipped
+(`snapshot3d/assets/channel-responses.npz`, `write_stored_responses`, rewritten by `bench print-predict` with the
+channel): measuring them costs a fit about 2 s per size. A channel or size they were not stored for is measured. The fit uses the noise alone unless `FitConfig.channel_gain`: with the gain, the fit boosts the
 shrunk frequencies and lost 0.2 dB of e2e_psnr at `moderate` (spot 16x4, `bench fit-channel`).
 
 Layouts: planes (3, C, R, R) float in [-1, 1]; responses (R, R) float32, index [v, u] as `plane_dct`.
@@ -15,14 +17,19 @@ Layouts: planes (3, C, R, R) float in [-1, 1]; responses (R, R) float32, index [
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import torch
 
-__all__ = ["channel_response", "dct_matrix", "through_channel", "response_tensors"]
+__all__ = ["channel_response", "dct_matrix", "through_channel", "response_tensors", "RESPONSES_FILE",
+           "stored_responses", "write_stored_responses"]
+
+RESPONSES_FILE = "channel-responses.npz"
+DRAWS = 4   # plane sets per host in the shipped responses
 
 
-def channel_response(res: int, channels: int, channel, hosts, draws: int = 4, seed: int = 0):
+def channel_response(res: int, channels: int, channel, hosts, draws: int = DRAWS, seed: int = 0):
     """(a, s), each (res, res) float32: per DCT coefficient, the least-squares gain of the restored
     coefficient on the sent one and the RMS of what is left, over `draws` random plane sets per host
     (host specs as `load_host` takes them), pooled over the 3 * channels plane channels."""
@@ -45,10 +52,56 @@ def channel_response(res: int, channels: int, channel, hosts, draws: int = 4, se
     return a.astype(np.float32), s.astype(np.float32)
 
 
+def _response_key(channel) -> str:
+    """What the shipped responses were measured for: the print codec, the channel, the hosts and the draws."""
+    from snapshot3d import formats
+
+    from .curves import PREDICT_HOSTS
+    return (f"{formats.PRINT_CODEC}|gain={float(channel.gain)!r}|unit={float(channel.unit)!r}|"
+            f"hosts={','.join(PREDICT_HOSTS)}|draws={DRAWS}|seed=0")
+
+
+@lru_cache(maxsize=1)
+def _stored() -> dict:
+    from snapshot3d.paths import asset
+
+    path = asset(RESPONSES_FILE)
+    if not path.is_file():
+        return {}
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def stored_responses(res: int, channels: int, channel) -> tuple[np.ndarray, np.ndarray] | None:
+    """The shipped (a, s) for planes of (res, channels) through `channel`, or None where they were stored for
+    another channel (or codec, hosts, draws) or not at this size."""
+    table = _stored()
+    if "key" not in table or str(table["key"]) != _response_key(channel) or f"a_{res}x{channels}" not in table:
+        return None
+    return table[f"a_{res}x{channels}"], table[f"s_{res}x{channels}"]
+
+
+def write_stored_responses(channel, sizes=None) -> Path:
+    """Measure the responses at `sizes` (default the print ladder's) through `channel` and ship them."""
+    from snapshot3d.paths import asset
+
+    from .config import LADDER_PRINT
+    from .curves import PREDICT_HOSTS
+
+    arrays = {"key": np.array(_response_key(channel))}
+    for res, channels in sizes or LADDER_PRINT:
+        arrays[f"a_{res}x{channels}"], arrays[f"s_{res}x{channels}"] = channel_response(res, channels, channel,
+                                                                                        PREDICT_HOSTS)
+    path = asset(RESPONSES_FILE)
+    np.savez_compressed(path, **arrays)
+    _stored.cache_clear()
+    return path
+
+
 @lru_cache(maxsize=16)
 def _cached_response(res: int, channels: int, channel) -> tuple[np.ndarray, np.ndarray]:
     from .curves import PREDICT_HOSTS
-    return channel_response(res, channels, channel, PREDICT_HOSTS)
+    return stored_responses(res, channels, channel) or channel_response(res, channels, channel, PREDICT_HOSTS)
 
 
 def response_tensors(res: int, channels: int, device=None, channel=None, gain: bool = True,
