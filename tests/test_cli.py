@@ -72,14 +72,14 @@ def test_render_corrupt_scene(tmp_path):
 def test_fit_render_mesh_end_to_end(tmp_path):
     """A short real fit of the shipped default, then render and mesh from the written scene file."""
     out = tmp_path / "p.s3d"
-    proc = run("fit", "builtin:procedural", "-o", str(out), "--size", "64", "--steps", "120", "--plane-res", "32",
-               "--plane-channels", "4", "--occ-warmup", "40", "--report", str(tmp_path / "fit.json"))
+    proc = run("fit", "builtin:procedural", "-o", str(out), "--size", "64", "--steps", "60", "--plane-res", "32",
+               "--plane-channels", "4", "--occ-warmup", "20", "--report", str(tmp_path / "fit.json"))
     assert proc.returncode == 0, proc.stderr
     rep = json.loads((tmp_path / "fit.json").read_text())
     assert set(rep) == {"field_psnr", "field_ssim", "scene_kb", "fit_seconds", "steps", "plane_res", "plane_channels",
                         "head"}
     assert rep["head"] == "the shared decoder's"   # no --medium print: --head auto leaves the shared head
-    assert rep["plane_res"] == 32 and rep["plane_channels"] == 4 and rep["steps"] == 120
+    assert rep["plane_res"] == 32 and rep["plane_channels"] == 4 and rep["steps"] == 60
     assert rep["field_psnr"] > 18.0 and abs(rep["scene_kb"] - (3 * 4 * 32 * 32 + 36) / formats.KB) < 0.01
     proc = run("render", str(out), "-o", str(tmp_path / "r"), "--views", "3", "--size", "48")
     assert proc.returncode == 0, proc.stderr
