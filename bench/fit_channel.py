@@ -135,9 +135,7 @@ def bench_fit_channel_command(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     builtin = args.scene.startswith("builtin:")
     posed = load_scene(args.scene, size=args.size) if builtin else load_scene(args.scene, downscale=args.downscale)
-    decoder = load_decoder()
-    for p in decoder.parameters():
-        p.requires_grad_(False)
+    decoder = load_decoder()   # frozen
     cfg = FitConfig(plane_res=args.plane_res, plane_channels=args.plane_channels, steps=args.steps, seed=args.seed)
     stop = int(np.ceil(cfg.steps * (1 - cfg.qat_fraction)))
     t0 = time.perf_counter()

@@ -19,7 +19,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.paths import asset
 
 from .config import LADDER_PRINT, DecoderConfig, FitConfig
-from .field import Decoder
+from .field import Decoder, frozen
 from .fit import new_state, train_step
 
 __all__ = ["DecoderConfig", "train_decoder", "load_decoder", "read_decoder", "frozen", "decoder_path", "scene_decoder"]
@@ -34,14 +34,6 @@ def load_decoder(version: str = formats.DECODER_VERSION) -> Decoder:
     if not path.is_file():
         raise UserError(f"decoder {version} is not installed ({path}); run 'snapshot3d train decoder'")
     return frozen(read_decoder(str(path)))
-
-
-def frozen(dec: Decoder) -> Decoder:
-    """`dec` in eval mode with no parameter requiring a gradient (in place)."""
-    dec.eval()
-    for p in dec.parameters():
-        p.requires_grad_(False)
-    return dec
 
 
 def scene_decoder(scene) -> Decoder:

@@ -14,7 +14,7 @@ from torch import Tensor, nn
 
 from snapshot3d import formats
 
-__all__ = ["sample_planes", "decode", "activate", "composite", "TriPlanes", "Decoder", "straight_through_8bit"]
+__all__ = ["sample_planes", "decode", "activate", "composite", "TriPlanes", "Decoder", "frozen", "straight_through_8bit"]
 
 _AXES = torch.tensor(formats.PLANE_AXES)
 
@@ -112,3 +112,11 @@ class Decoder(nn.Module):
         dec = cls(hidden=int(arrays["l0.weight"].shape[0]), layers=layers)
         dec.load_state_dict({k: torch.from_numpy(np.asarray(arrays[k])) for k in dec.state_dict()})
         return dec
+
+
+def frozen(dec: Decoder) -> Decoder:
+    """`dec` in eval mode with no parameter requiring a gradient (in place)."""
+    dec.eval()
+    for p in dec.parameters():
+        p.requires_grad_(False)
+    return dec

@@ -21,7 +21,7 @@ from snapshot3d.scene import dequantize_planes, quantize_planes
 
 from .channel_fit import through_channel
 from .config import FitConfig, check_fit_config
-from .field import TriPlanes, straight_through_8bit
+from .field import TriPlanes, frozen, straight_through_8bit
 from .occupancy import OccupancyGrid
 from .rays import RayBank, make_rays, recomposite
 from .render import density_fn, render_rays
@@ -257,8 +257,7 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
     background model): the last phase is run both plain and through the channel's noise, and the channel
     ending is kept where `ending.score` expects it `ending.MARGIN_DB` better (`FitResult.ending` says which; with
     a head of the scene's own, unless it expects it that much worse)."""
-    for p in decoder.parameters():
-        p.requires_grad_(False)
+    frozen(decoder)
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     st = new_state(posed, cfg, init_planes, hull, device)

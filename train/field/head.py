@@ -15,7 +15,7 @@ from torch import Tensor
 
 from snapshot3d.head import CODE_MAX, encode_head, head_weights
 
-from .field import Decoder
+from .field import Decoder, frozen
 
 __all__ = ["HeadDecoder", "own_head", "head_text", "with_head", "last_layer"]
 
@@ -80,6 +80,4 @@ def with_head(decoder: Decoder, text: str | None) -> Decoder:
     with torch.no_grad():
         lin.weight.copy_(full[:, :-1])
         lin.bias.copy_(full[:, -1])
-    for p in out.parameters():
-        p.requires_grad_(False)
-    return out
+    return frozen(out)
