@@ -9,8 +9,9 @@ regression over simulations of the channel's model (`print_channel.predicted_pla
 the bundled hosts `curves.PREDICT_HOSTS`. `through_channel` applies them in torch (the DCT as a matrix
 product). The responses at the print ladder's sizes for the channel of budget-curves.json are shipped
 (`snapshot3d/assets/channel-responses.npz`, `write_stored_responses`, rewritten by `bench print-predict` with the
-channel): measuring them costs a fit about 2 s per size. A channel or size they were not stored for is measured. The fit uses the noise alone unless `FitConfig.channel_gain`: with the gain, the fit boosts the
-shrunk frequencies and lost 0.2 dB of e2e_psnr at `moderate` (spot 16x4, `bench fit-channel`).
+channel): measuring them costs a fit about 2 s per size. A channel or size they were not stored for is measured.
+The fit uses the noise alone unless `FitConfig.channel_gain`: with the gain, the fit boosts the shrunk
+frequencies and lost 0.2 dB of e2e_psnr at `moderate` (spot 16x4, `bench fit-channel`).
 
 Layouts: planes (3, C, R, R) float in [-1, 1]; responses (R, R) float32, index [v, u] as `plane_dct`.
 """
