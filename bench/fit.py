@@ -22,7 +22,7 @@ from snapshot3d.train.field.evaluate import evaluate_planes
 from snapshot3d.train.field.fit import fit, hull_grid
 
 from .common import pyplot, run_metadata
-from .scenes import BENCH_SCENES, load_bench_scene
+from .scenes import BENCH_SCENES, checked_scenes, load_bench_scene
 
 __all__ = ["bench_fit_command", "BENCH_SCENES"]
 
@@ -111,6 +111,7 @@ def bench_fit_command(args) -> int:
         merge_results(out)
         print(f"wrote {out}/fit.csv, fit.json, fit.png")
         return 0
+    scenes = checked_scenes(args.scenes)   # every name checked before a folder is made or a scene fitted
     out.mkdir(parents=True, exist_ok=True)
     cores = os.cpu_count()
     suffix = "" if args.scenes == ",".join(BENCH_SCENES) else "_" + args.scenes.replace(",", "_")
@@ -130,9 +131,7 @@ def bench_fit_command(args) -> int:
         (out / f"fit{suffix}.json").write_text(json.dumps(meta, indent=2))
         _chart(rows, out / f"fit{suffix}.png", cores, torch.get_num_threads())
 
-    for name in args.scenes.split(","):
-        if name not in BENCH_SCENES:
-            raise UserError(f"--scenes: unknown bench scene {name!r} (choose from {', '.join(BENCH_SCENES)})")
+    for name in scenes:
         bench_scene(name, args.quick, save)
     print(f"wrote {out}/fit{suffix}.csv, .json, .png")
     return 0

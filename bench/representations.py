@@ -18,7 +18,7 @@ from pathlib import Path
 from snapshot3d.errors import UserError
 
 from .common import RowBlocks, pyplot, write_report
-from .scenes import BENCH_SCENES, load_bench_scene
+from .scenes import checked_scenes, load_bench_scene
 
 __all__ = ["bench_representations_command"]
 
@@ -124,10 +124,7 @@ def _checked(args) -> tuple[list[float], list[str], list[str]]:
     except ValueError:
         raise UserError(f"--budgets-kb must be numbers of kB separated by commas, not {args.budgets_kb!r}") from None
     kinds = [k for k in args.kinds.split(",") if k]
-    scenes = [s for s in args.scenes.split(",") if s]
-    unknown = [s for s in scenes if s not in BENCH_SCENES]
-    if unknown:
-        raise UserError(f"--scenes: unknown bench scene {unknown[0]!r} (choose from {', '.join(BENCH_SCENES)})")
+    scenes = checked_scenes(args.scenes)
     for opt, value, least in (("--rep-steps", args.rep_steps, 1), ("--rep-rays", args.rep_rays, 1),
                               ("--rep-views", args.rep_views, 0)):
         if value < least:

@@ -39,7 +39,7 @@ def test_quantize_keeps_256_levels_and_passes_the_gradient():
     assert torch.equal(t.grad, torch.ones_like(t))
 
 
-def test_refused_in_one_line():
+def test_refused_in_one_line(tmp_path):
     with pytest.raises(UserError, match="unknown representation 'octree'"):
         size_for_budget("octree", 4000)
     with pytest.raises(UserError, match="hold no grid field"):
@@ -51,6 +51,10 @@ def test_refused_in_one_line():
                         (["--rep-steps", "0"], "--rep-steps must be >= 1, not 0"),
                         (["--budgets-kb", "-4"], "budgets above 0")):
         assert_one_line_error(run_cli("bench", "fit", "--representations", *args, "--out", "/nonexistent/x"), cause)
+    # plain `bench fit` checks every scene before it fits the first or makes its folder
+    assert_one_line_error(run_cli("bench", "fit", "--scenes", "spot,nope", "--out", str(tmp_path / "f")),
+                          "unknown bench scene 'nope'")
+    assert not (tmp_path / "f").exists()
 
 
 @pytest.mark.parametrize("kind,steps,rays,gain", [("triplane", 60, 1024, 1.5), ("grid", 60, 1024, 1.5),
