@@ -20,6 +20,7 @@ from snapshot3d.make_capture_config import SynthCaptureConfig
 from snapshot3d.train.field.config import FitConfig
 
 from .common import run_metadata, write_rows
+from .pose_error import pose_error
 
 __all__ = ["MODES", "fit_and_score", "bench_capture_background_command", "bench_fit_command"]
 
@@ -63,6 +64,9 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-bundle-box-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "box"}),
          "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"}),
          "outer-capture": ("transforms.json", "outer", "auto", {"refine_poses": "auto"}),
+         # the adjusted poses refined on by the planes from half the steps (docs/capture.md, the late start)
+         "outer-capture-late": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "fit",
+                                                                     "pose_start": 0.5}),
          "outer-capture-nobasekeep": ("transforms.json", "outer", "auto", {"refine_poses": "auto",
                                                                             "object_base_keep": 0.0}),
          "outer-capture-noground": ("transforms.json", "outer", "auto", {"refine_poses": "auto",
@@ -73,15 +77,19 @@ CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size"
 CAPTURE_QUICK = {"size": 48, "views": 8, "steps": 20}
 
 
-def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = None) -> dict:
+def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = None, align_steps: int = 100) -> dict:
     """Fit capture folder `cap` (written by make-capture) the way `mode` says, in the world of its truth.json
-    (--up 0,0,1), and score it against the true masks and box; with `figure`, also write `_side_by_side` there."""
+    (--up 0,0,1), and score it against the true masks and box; pose_px_written and pose_px_fit: how far the
+    training poses as written and as the fit ended with them lie from the truth (bench/pose_error.py, the median
+    frame's px); object_psnr_aligned: object_psnr with the held-out views' poses first aligned to the planes
+    (`align_steps` steps of train/field/view_align.py); with `figure`, also write `_side_by_side` there."""
     import torch
 
     from snapshot3d.loaders import load_scene
     from snapshot3d.train.field.commands import fit_scene
     from snapshot3d.train.field.decoder import load_decoder
     from snapshot3d.train.field.object_score import score_object
+    from snapshot3d.train.field.view_align import align_views
 
     name, background, box, fields = MODES[mode]
     t0 = time.perf_counter()
@@ -93,11 +101,22 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = No
                        capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
     true_box = json.loads((cap / "gt/truth.json").read_text())["box"]
     decoder = load_decoder(cfg.decoder)
-    score = score_object(torch.from_numpy(scene.planes()), decoder, scene.box, truth, true_box)
+    planes = torch.from_numpy(scene.planes())
+    score = score_object(planes, decoder, scene.box, truth, true_box)
+    t = truth.test   # the held-out views aligned to the fit first: what the planes lack, not where they lie
+    c2w = truth.c2w.copy()
+    c2w[t] = align_views(planes, decoder, scene.box, truth.c2w[t], truth.intrinsics[t], truth.images[t],
+                         truth.alpha[t] >= 0.5, steps=align_steps)
+    score["object_psnr_aligned"] = score_object(planes, decoder, scene.box, replace(truth, c2w=c2w),
+                                                true_box)["object_psnr"]
+    written = load_scene(str(cap / name), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
+    at = {"written": written.c2w[written.train], "fit": report.pop("_train_c2w")}
+    true_c2w, intrinsics = truth.c2w[truth.train], truth.intrinsics[truth.train]
+    poses = {f"pose_px_{k}": pose_error(c2w, true_c2w, intrinsics, true_box)["px_median"] for k, c2w in at.items()}
     if figure is not None and renders is not None:
         photos = load_scene(str(cap / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
         _side_by_side(figure, scene, truth, photos.images, renders, decoder)
-    return {"mode": mode, **{k: round(v, 4) for k, v in score.items()}, "field_psnr": report["field_psnr"],
+    return {"mode": mode, **{k: round(v, 4) for k, v in score.items()}, "field_psnr": report["field_psnr"], **poses,
             "fit_seconds": round(seconds, 1), "box": np.round(scene.box, 3).tolist(),
             "box_from": report.get("capture", {}).get("box_from"), **report.get("background", {}),
             **({"pose_refinement": report["pose_refinement"]} if "pose_refinement" in report else {})}

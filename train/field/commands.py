@@ -71,7 +71,8 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     `device`: a torch.device, a --device name, or None: the CPU) and evaluate. Returns (Scene, report dict,
     held-out renders). The capture is loaded before torch is imported, so that a wrong path fails at once;
     one line says what was read. `channel`: the print channel's model the budget predicts with (None: the
-    `moderate` one)."""
+    `moderate` one). With --budget fixed the report's `_train_c2w` (V, 4, 4) holds the training poses the fit
+    ended with (adjusted and refined where it did so), for the benches; `fit` drops it."""
     from snapshot3d.capture import describe
     from snapshot3d.loaders import load_scene
     from snapshot3d.scene import dequantize_planes
@@ -126,9 +127,13 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
                              samples=cfg.background_samples)
         report["_throughput"] = {"rays_per_s": res.state.rays / max(res.seconds, 1e-9),
                                  "samples_per_s": res.state.samples / max(res.seconds, 1e-9)}
+        report["_train_c2w"] = posed.c2w[posed.train]   # (V, 4, 4): the poses the fit ended with (bench)
         if res.state.poses is not None:
+            from .object_carve import refined_c2w
             from .pose_refine import pose_summary
+            params = res.state.poses.params.detach().cpu().numpy()
             report["pose_refinement"] = pose_summary(res.state.poses.params, res.state.frame.scale)
+            report["_train_c2w"] = refined_c2w(posed.c2w[posed.train], params, res.state.frame.scale)
     else:
         raise UserError(f"--budget must be 'fixed' or 'auto', not {budget!r}")
     seconds = time.perf_counter() - t0
@@ -210,6 +215,7 @@ def fit_command(args) -> int:
     if channel_info is not None:
         report["channel"] = channel_info
     throughput = report.pop("_throughput", None)
+    report.pop("_train_c2w", None)
     save_scene(scene, out)
     if ckpt is not None and ckpt.exists():
         ckpt.unlink()
