@@ -77,19 +77,17 @@ CAPTURE_DEFAULTS = {"meshes": "spot,duck", "modes": "white,outer,masked", "size"
 CAPTURE_QUICK = {"size": 48, "views": 8, "steps": 20}
 
 
-def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = None, align_steps: int = 100) -> dict:
+def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = None) -> dict:
     """Fit capture folder `cap` (written by make-capture) the way `mode` says, in the world of its truth.json
     (--up 0,0,1), and score it against the true masks and box; pose_px_written and pose_px_fit: how far the
     training poses as written and as the fit ended with them lie from the truth (bench/pose_error.py, the median
-    frame's px); object_psnr_aligned: object_psnr with the held-out views' poses first aligned to the planes
-    (`align_steps` steps of train/field/view_align.py); with `figure`, also write `_side_by_side` there."""
+    frame's px); with `figure`, also write `_side_by_side` there."""
     import torch
 
     from snapshot3d.loaders import load_scene
     from snapshot3d.train.field.commands import fit_scene
     from snapshot3d.train.field.decoder import load_decoder
     from snapshot3d.train.field.object_score import score_object
-    from snapshot3d.train.field.view_align import align_views
 
     name, background, box, fields = MODES[mode]
     t0 = time.perf_counter()
@@ -101,14 +99,7 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = No
                        capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
     true_box = json.loads((cap / "gt/truth.json").read_text())["box"]
     decoder = load_decoder(cfg.decoder)
-    planes = torch.from_numpy(scene.planes())
-    score = score_object(planes, decoder, scene.box, truth, true_box)
-    t = truth.test   # the held-out views aligned to the fit first: what the planes lack, not where they lie
-    c2w = truth.c2w.copy()
-    c2w[t] = align_views(planes, decoder, scene.box, truth.c2w[t], truth.intrinsics[t], truth.images[t],
-                         truth.alpha[t] >= 0.5, steps=align_steps)
-    score["object_psnr_aligned"] = score_object(planes, decoder, scene.box, replace(truth, c2w=c2w),
-                                                true_box)["object_psnr"]
+    score = score_object(torch.from_numpy(scene.planes()), decoder, scene.box, truth, true_box)
     written = load_scene(str(cap / name), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
     at = {"written": written.c2w[written.train], "fit": report.pop("_train_c2w")}
     true_c2w, intrinsics = truth.c2w[truth.train], truth.intrinsics[truth.train]

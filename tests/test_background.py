@@ -357,11 +357,10 @@ def test_the_object_box_share_is_checked_in_one_line():
 
 def test_a_bench_row_says_how_far_the_poses_lie_from_the_truth(capture):
     """bench capture-background's row on a capture of exact poses: the poses as written and as fitted (no adjustment
-    with the true masks) lie on the truth, and the held-out views aligned to the planes score near where they
-    lie (train/field/view_align.py)."""
+    with the true masks) lie on the truth (bench/pose_error.py)."""
     from snapshot3d.bench.capture_background import fit_and_score
     from snapshot3d.train.field.config import FitConfig
     row = fit_and_score(capture, "masked", FitConfig(steps=30, batch_rays=1024, plane_res=32, plane_channels=4,
-                                                     occ_warmup=8), align_steps=10)
+                                                     occ_warmup=8))
     assert row["pose_px_written"] < 1e-3 and row["pose_px_fit"] < 1e-3, row
-    assert row["object_psnr"] > 12 and abs(row["object_psnr_aligned"] - row["object_psnr"]) < 1.0, row
+    assert row["object_psnr"] > 12, row
