@@ -62,7 +62,7 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-bundle-fit-refine-lr3": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "fit",
                                                                               "pose_lr": 0.003}),
          "outer-bundle-box-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "box"}),
-         "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"}),
+         "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"}),   # outer-capture before 12-06
          "outer-capture": ("transforms.json", "outer", "auto", {"refine_poses": "auto"}),
          # the adjusted poses refined on by the planes from half the steps (docs/capture.md, the late start)
          "outer-capture-late": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "fit",

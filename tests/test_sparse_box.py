@@ -158,11 +158,11 @@ def test_the_fit_starts_from_the_adjusted_poses_and_keeps_them_under_refine_pose
     assert posed.info["layout"] == "nerfstudio"
     cfg = resolve_autos(FitConfig(background="outer", object_box=0.0), "nerfstudio", None)   # no fit may run
     assert (cfg.refine_poses, cfg.bundle) == ("on", "fit")
-    out, info, kept = _tightened(posed, None, cfg, None, quiet=True, keep_adjusted=True)
-    assert kept.refine_poses == "off" and info["bundle"]["adjusted"]
+    out, info, late = _tightened(posed, None, cfg, None, quiet=True, late_start=True)
+    assert (late.refine_poses, late.pose_start) == ("on", 0.5) and info["bundle"]["adjusted"]
     assert not np.array_equal(out.c2w[out.train], posed.c2w[posed.train])
     np.testing.assert_array_equal(out.c2w[out.test], posed.c2w[posed.test])
-    assert "keeps them" in out.info["capture"]["box_from"]
+    assert "refines them from 50% of the steps" in out.info["capture"]["box_from"]
     _, _, refined = _tightened(replace(posed, info={**posed.info, "capture": dict(posed.info["capture"])}), None, cfg,
-                               None, quiet=True, keep_adjusted=False)
-    assert refined.refine_poses == "on"
+                               None, quiet=True, late_start=False)
+    assert (refined.refine_poses, refined.pose_start) == ("on", 0.1)

@@ -27,6 +27,12 @@ __all__ = ["fit_scene", "resolve_autos", "fit_command", "render_command", "mesh_
            "orbit_cameras", "render_scene"]
 
 
+# --refine-poses auto on poses adjusted to the photos' matches: the corrections start at half the steps at the
+# earliest (refined early, on planes still blurred, they move away from the truth; 7 noisy composites x 3 fits,
+# docs/capture.md "The late start, side by side")
+ADJUSTED_POSE_START = 0.5
+
+
 def _bar(desc: str, total: int):
     bar = progress(total, desc)
 
@@ -86,7 +92,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         cfg, chose = replace(cfg, background=mode), f"{mode} ({why})"
         if mode == "outer" and (capture is None or capture.box is None):
             posed = with_overlap_box(posed)
-    keep_adjusted = cfg.refine_poses == "auto"   # poses adjusted to the photos' matches are then not refined on
+    late_start = cfg.refine_poses == "auto"   # poses adjusted to the photos' matches are refined on from half way
     cfg = resolve_autos(cfg, posed.info.get("layout"), medium)
     read = posed.info.get("capture")
     if read and not quiet:
@@ -107,7 +113,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     bars = None if quiet else _bar
     report = {"background_mode": chose} if chose and not spec.startswith("builtin:") else {}
     if cfg.background == "outer" and read and str(read.get("box_from", "")).startswith("auto"):
-        posed, report["background"], cfg = _tightened(posed, decoder, cfg, device, quiet, keep_adjusted)
+        posed, report["background"], cfg = _tightened(posed, decoder, cfg, device, quiet, late_start)
     if budget == "auto":
         chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device, medium=medium,
                                    channel=channel)
@@ -155,10 +161,11 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     return scene, report, ev["renders"]
 
 
-def _tightened(posed, decoder, cfg, device, quiet: bool, keep_adjusted: bool = False):
+def _tightened(posed, decoder, cfg, device, quiet: bool, late_start: bool = False):
     """`posed` in the automatic box tightened from a short fit's density (train/field/box_tighten.py), its
-    capture account updated; what the tightening found; and cfg, its pose refinement off where the training poses
-    were adjusted to the photos' matches and `keep_adjusted` (--refine-poses auto)."""
+    capture account updated; what the tightening found; and cfg, where the training poses were adjusted to the
+    photos' matches and `late_start` (--refine-poses auto), its pose corrections starting at ADJUSTED_POSE_START
+    of the steps at the earliest."""
 
     from .box_tighten import object_box, tighten_box
     box, info, adjusted = tighten_box(posed, decoder, cfg, device)
@@ -166,8 +173,8 @@ def _tightened(posed, decoder, cfg, device, quiet: bool, keep_adjusted: bool = F
         c2w = posed.c2w.copy()
         c2w[posed.train] = adjusted
         posed = replace(posed, c2w=c2w)
-        if keep_adjusted:   # refined on by the planes they lost on 5 of 7 noisy composites (docs/capture.md)
-            cfg = replace(cfg, refine_poses="off")
+        if late_start:   # refined early, on planes still blurred, they move away from the truth (docs/capture.md)
+            cfg = replace(cfg, pose_start=max(cfg.pose_start, ADJUSTED_POSE_START))
     read = posed.info["capture"]
     ground = f", the ground at z = {info['ground_z']:.3g}" if info["ground_z"] is not None else ""
     ground += ", sides and top cut" if info.get("sides_cut") else ""
@@ -181,7 +188,8 @@ def _tightened(posed, decoder, cfg, device, quiet: bool, keep_adjusted: bool = F
     if adjusted is not None:
         source += (f", at the training poses adjusted to the photos' matches (median turn "
                    f"{info['bundle']['median_turn_deg']:.2f} deg; the fit starts from them"
-                   f"{' and keeps them' if cfg.refine_poses == 'off' else ' and refines them on'})")
+                   + (" and keeps them)" if cfg.refine_poses == "off" else
+                      f" and refines them from {cfg.pose_start:.0%} of the steps)"))
     read.update(box=box.tolist(), box_from=read["box_from"] + f"; tightened from {source}{ground}")
     if not quiet:
         lo, hi = (", ".join(f"{float(x):.3g}" for x in corner) for corner in box)

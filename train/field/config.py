@@ -87,8 +87,9 @@ class FitConfig:
     refine_poses: str = config_field("auto", "learn a small correction of each training view's pose with the "
                                      "planes (a rotation about the camera and a shift, train/field/pose_refine.py): "
                                      "on, off, or auto: on for nerfstudio and COLMAP captures (poses from a solver "
-                                     "or an app) unless --bundle adjusted them to the photos' matches first, off "
-                                     "for builtin and Blender scenes (exact poses; a fit's core treats auto as off)")
+                                     "or an app), from half the steps at the earliest where --bundle adjusted them "
+                                     "to the photos' matches first; off for builtin and Blender scenes (exact "
+                                     "poses; a fit's core treats auto as off)")
     pose_lr: float = config_field(1e-3, "with --refine-poses: the corrections' learning rate (decayed as the planes')")
     pose_start: float = config_field(0.1, "with --refine-poses: fraction of the steps before the corrections move (the "
                                      "planes first take a rough shape)")
