@@ -92,4 +92,3 @@ def test_refinement_finds_a_known_pose_error():
     assert np.median(before) > 0.5
     print("rotation error before", before.round(3), "after", after.round(3))
     assert np.median(after) < 0.35 * np.median(before), (before, after)
-

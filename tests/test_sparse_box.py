@@ -143,10 +143,10 @@ def test_poses_half_a_degree_off_are_adjusted_before_the_box_which_then_holds_th
     assert abs(info["sparse_ground"] - truth[0, 2]) < 0.03 * (truth[1, 2] - truth[0, 2])
 
 
-def test_the_fit_starts_from_the_adjusted_poses_and_keeps_them_under_refine_poses_auto(capture):
+def test_the_fit_starts_from_the_adjusted_poses_and_refines_them_from_half_way_under_refine_poses_auto(capture):
     """fit's box step on a nerfstudio capture with --refine-poses auto and --bundle auto: the training poses are
-    replaced by the adjusted ones, the held-out ones kept, and the planes do not refine them on; with --refine-poses
-    on given, they do."""
+    replaced by the adjusted ones, the held-out ones kept, and the planes refine them on from half the steps; with
+    --refine-poses on given, from --pose-start."""
     from dataclasses import replace
 
     from snapshot3d.capture import CaptureOptions, with_overlap_box
