@@ -104,8 +104,9 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = No
     at = {"written": written.c2w[written.train], "fit": report.pop("_train_c2w")}
     true_c2w, intrinsics = truth.c2w[truth.train], truth.intrinsics[truth.train]
     poses = {f"pose_px_{k}": pose_error(c2w, true_c2w, intrinsics, true_box)["px_median"] for k, c2w in at.items()}
-    if figure is not None and renders is not None:
-        photos = load_scene(str(cap / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
+    if figure is not None and renders is not None:   # the photos as read (the capture's own file, not the masked)
+        photos = written if name == "transforms.json" else \
+            load_scene(str(cap / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
         _side_by_side(figure, scene, truth, photos.images, renders, decoder)
     return {"mode": mode, **{k: round(v, 4) for k, v in score.items()}, "field_psnr": report["field_psnr"], **poses,
             "fit_seconds": round(seconds, 1), "box": np.round(scene.box, 3).tolist(),

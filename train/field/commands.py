@@ -133,13 +133,13 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
                              samples=cfg.background_samples)
         report["_throughput"] = {"rays_per_s": res.state.rays / max(res.seconds, 1e-9),
                                  "samples_per_s": res.state.samples / max(res.seconds, 1e-9)}
-        report["_train_c2w"] = posed.c2w[posed.train]   # (V, 4, 4): the poses the fit ended with (bench)
+        train_c2w = posed.c2w[posed.train]   # (V, 4, 4): the poses the fit ended with, for the benches
         if res.state.poses is not None:
             from .object_carve import refined_c2w
             from .pose_refine import pose_summary
-            params = res.state.poses.params.detach().cpu().numpy()
             report["pose_refinement"] = pose_summary(res.state.poses.params, res.state.frame.scale)
-            report["_train_c2w"] = refined_c2w(posed.c2w[posed.train], params, res.state.frame.scale)
+            train_c2w = refined_c2w(train_c2w, res.state.poses.params.detach().cpu().numpy(), res.state.frame.scale)
+        report["_train_c2w"] = train_c2w
     else:
         raise UserError(f"--budget must be 'fixed' or 'auto', not {budget!r}")
     seconds = time.perf_counter() - t0
