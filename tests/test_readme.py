@@ -11,7 +11,7 @@ from snapshot3d.builtin import shared_data_dir
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 # appended to each command of the README's pipeline: speed only, nothing that changes what runs
-SMALL = {"fit": ["--steps", "30", "--size", "64", "--occ-warmup", "10"], "embed": ["--refine", "2"],
+SMALL = {"fit": ["--steps", "12", "--size", "48", "--occ-warmup", "4", "--batch-rays", "1024"], "embed": ["--refine", "2"],
          "decode": ["--views", "3", "--size", "64"]}
 
 
