@@ -167,7 +167,8 @@ def bench_capture_background_command(args) -> int:
                     occ_warmup=args.occ_warmup)
     capcfg = SynthCaptureConfig(size=args.size, views=args.views, seed=args.seed,
                                 pose_noise_deg=getattr(args, "pose_noise_deg", 0.0),
-                                pose_noise_frac=getattr(args, "pose_noise_frac", 0.0))
+                                pose_noise_frac=getattr(args, "pose_noise_frac", 0.0),
+                                arc_deg=getattr(args, "arc_deg", 720.0))
     rows, name = [], getattr(args, "name", None) or "capture_background"
     fit_seeds = _fit_seeds(getattr(args, "fit_seeds", None), args.seed)
     with tempfile.TemporaryDirectory() as tmp:

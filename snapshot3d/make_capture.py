@@ -28,6 +28,7 @@ CHUNK = 16   # views rasterised together
 def check_config(cfg: SynthCaptureConfig) -> SynthCaptureConfig:
     """The config with its values checked (UserError, one line, naming the option)."""
     validate.integer(cfg.views, "--views", 2, 5000)
+    validate.number(cfg.arc_deg, "--arc-deg", 10.0, 720.0)
     validate.integer(cfg.size, "--size", 16, 4096)
     validate.number(cfg.fov_deg, "--fov-deg", 10.0, 120.0)
     validate.number(cfg.exposure_jitter, "--exposure-jitter", 0.0, 3.0)
@@ -69,7 +70,7 @@ def synth_capture(spec: str, cfg: SynthCaptureConfig, keep_pinhole: bool = False
     lo, hi = mesh.bounds
     centre = 0.5 * (lo + hi)
     radius = float(np.linalg.norm(np.asarray(mesh.vertices) - centre, axis=1).max())
-    c2w = walk_poses(cfg.views, centre, radius, f / (h / 2), rng)
+    c2w = walk_poses(cfg.views, centre, radius, f / (h / 2), rng, np.deg2rad(cfg.arc_deg))
     map_x, map_y, (px, py) = distort_maps(w, h, intr, cfg.lens)
     big = intr + np.array([0, 0, px, py])
     n = cfg.views

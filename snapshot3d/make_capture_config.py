@@ -13,6 +13,8 @@ class SynthCaptureConfig:
     """How a synthetic capture is made (`snapshot3d.make_capture`); one field per command-line option."""
 
     views: int = config_field(48, "frames, taken on a walk around the object (two turns, rising from low to high)")
+    arc_deg: float = config_field(720.0, "degrees the walk turns round the object over its frames (720: two turns; "
+                                         "120: a frontal arc, as of an object against a wall)")
     size: int = config_field(256, "image width in pixels; the height is 3/4 of it (a landscape phone frame)")
     seed: int = config_field(0, "seed of the photos picked, the walk, the lens centre and the jitters")
     backdrop: str = config_field("auto", "photo wrapped round the room behind the object: an image file, or auto (a "

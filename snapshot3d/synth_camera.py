@@ -17,12 +17,14 @@ ELEVATIONS_DEG = (8.0, 50.0)  # the walk rises from the first to the second over
 FILL = 0.7                    # the object's bounding sphere spans this fraction of the half-height
 
 
-def walk_poses(n: int, centre: np.ndarray, radius: float, fy_over_half_h: float, rng: np.random.Generator):
-    """(n, 4, 4) float64 OpenGL c2w: two turns round `centre`, rising through ELEVATIONS_DEG, at a distance that
-    fits a sphere of `radius` in FILL of the half-height (fy / (H / 2) given), with hand-held wobble: the distance
-    varies by +-6%, the aim by 3% of the radius, the roll by about 1.5 degrees."""
+def walk_poses(n: int, centre: np.ndarray, radius: float, fy_over_half_h: float, rng: np.random.Generator,
+               arc: float = 4 * np.pi):
+    """(n, 4, 4) float64 OpenGL c2w: a walk turning `arc` radians round `centre` (two turns by default) from a
+    random start, rising through ELEVATIONS_DEG, at a distance that fits a sphere of `radius` in FILL of the
+    half-height (fy / (H / 2) given), with hand-held wobble: the distance varies by +-6%, the aim by 3% of the
+    radius, the roll by about 1.5 degrees."""
     t = (np.arange(n) + 0.5) / n
-    az = rng.uniform(0, 2 * np.pi) + 4 * np.pi * t
+    az = rng.uniform(0, 2 * np.pi) + arc * t
     el = np.deg2rad(ELEVATIONS_DEG[0] + (ELEVATIONS_DEG[1] - ELEVATIONS_DEG[0]) * t)
     dist = radius / np.sin(np.arctan(FILL / fy_over_half_h)) * (1 + 0.06 * np.sin(6 * np.pi * t + rng.uniform(0, 6)))
     dirs = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], -1)

@@ -13,7 +13,7 @@ from snapshot3d.errors import UserError
 from snapshot3d.loaders import load_scene
 from snapshot3d.make_capture import make_capture, synth_capture, write_capture
 from snapshot3d.make_capture_config import SynthCaptureConfig
-from snapshot3d.synth_camera import perturb_poses
+from snapshot3d.synth_camera import perturb_poses, walk_poses
 
 LENS = (-0.25, 0.05, 0.002, -0.001)   # strong, so that a missed or wrong undistortion shows at 128 px
 CFG = SynthCaptureConfig(views=4, size=128, fov_deg=90.0, lens=LENS, pose_noise_deg=0.5, pose_noise_frac=0.01)
@@ -119,6 +119,20 @@ def test_pose_noise_has_the_rms_asked():
     assert 0.45 < np.sqrt(np.mean(angle ** 2)) < 0.55 and 0.009 < np.sqrt(np.mean(shift ** 2)) < 0.011
 
 
+@pytest.mark.parametrize("arc_deg", [720.0, 120.0])
+def test_the_walk_turns_the_arc_asked(arc_deg):
+    """--arc-deg: the cameras' azimuths round the object step evenly through the arc (two turns by default, a
+    frontal arc on request), whatever the hand-held wobble; the default walk is the one written before the option."""
+    n, centre = 48, np.array([0.1, -0.2, 0.3])
+    c2w = walk_poses(n, centre, 1.0, 1.5, np.random.default_rng(3), np.deg2rad(arc_deg))
+    rel = c2w[:, :3, 3] - centre
+    az = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]))
+    assert abs(np.degrees(az[-1] - az[0]) - arc_deg * (n - 1) / n) < 0.5
+    assert np.all(np.diff(az) > 0)
+    if arc_deg == 720.0:
+        assert np.array_equal(c2w, walk_poses(n, centre, 1.0, 1.5, np.random.default_rng(3)))
+
+
 def test_cli_writes_a_capture_and_falls_back_to_bundled_photos(tmp_path, monkeypatch):
     monkeypatch.setenv("SNAPSHOT3D_SHARED_DATA", str(tmp_path / "absent"))
     out = tmp_path / "cap"
@@ -139,6 +153,7 @@ def test_cli_writes_a_capture_and_falls_back_to_bundled_photos(tmp_path, monkeyp
     (["builtin:procedural", "--size", "4"], "--size must be an integer"),
     (["builtin:procedural", "--backdrop", "/nonexistent.jpg"], "backdrop photo not found"),
     (["builtin:procedural", "--lens", "-0.9", "0", "0", "0"], "cannot be inverted"),
+    (["builtin:procedural", "--arc-deg", "5"], "--arc-deg must be a finite number in [10, 720]"),
 ])
 def test_bad_input_is_one_line(tmp_path, args, match):
     proc = run_cli("make-capture", *args, "-o", str(tmp_path / "cap"), "--views", "2", "--size", args[-1]

@@ -114,6 +114,8 @@ def add_commands(sub) -> None:
                     "poses (degrees; the fits are scored at the true poses)")
     bg.add_argument("--pose-noise-frac", type=float, default=0.0, help="rms position error of the written poses, a "
                     "fraction of the camera's distance")
+    bg.add_argument("--arc-deg", type=float, default=720.0, help="degrees the capture's walk turns round the "
+                    "object (720: two turns; 120: a frontal arc)")
     bg.add_argument("--name", default="capture_background", help="results file name (without .json/.csv)")
     bg.add_argument("--figure", action="store_true", help="also NAME_side_by_side_MESH.png of each mesh's outer "
                     "fits: held-out input photos, the fit with its background model, the object alone")
