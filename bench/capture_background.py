@@ -38,8 +38,6 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-nosilhouette": ("transforms.json", "outer", "auto", {"object_silhouette": 1.0}),
          "outer-silhouette-0.3": ("transforms.json", "outer", "auto", {"object_silhouette": 0.3}),
          "outer-nobasekeep": ("transforms.json", "outer", "auto", {"object_base_keep": 0.0}),
-         # the silhouettes' vote before 2026-12-06: every photo whose frame holds a cell votes, hidden or not
-         "outer-silhouette-inframe": ("transforms.json", "outer", "auto", {"object_silhouette_seen": False}),
          "outer-noground": ("transforms.json", "outer", "auto", {"ground_texture": 0}),
          "outer-density": ("transforms.json", "outer", "auto", {"sparse_box": False}),
          "outer-nobox": ("transforms.json", "outer", "auto", {"object_box": 0.0}),

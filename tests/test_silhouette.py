@@ -71,27 +71,6 @@ def test_points_outside_the_silhouettes_are_voted_out_and_views_without_one_do_n
     assert fewer[0] == 0 and fewer[2] > 0.5 and fewer[2] != share[2], (fewer, share)
 
 
-def test_a_view_votes_only_on_the_points_the_object_does_not_hide_from_it():
-    """A wall of opaque cells across y: from a camera on +y a point behind it is hidden and one in front seen, and
-    the other way round from -y; from +x both are seen. A point hidden from the +y camera and outside the
-    silhouette only in the views that see it is voted fully out when the hidden view does not count."""
-    from snapshot3d.cameras import look_at
-    from snapshot3d.train.field.silhouette import seen_past
-
-    box = np.array([[-1.0, -1, -1], [1, 1, 1]])
-    alpha = np.zeros((32, 32, 32))
-    alpha[:, 20:24, :] = 0.9                                   # y in 0.25..0.5
-    c2w = np.stack([look_at(np.array(eye), np.zeros(3)) for eye in ([0, 5.0, 0], [0, -5.0, 0], [5.0, 0, 0])])
-    points = np.array([[0.0, -0.5, 0.0], [0.0, 0.8, 0.0], [0.0, 0.0, 0.6]])
-    seen = seen_past(points, c2w, alpha, box)
-    assert seen.tolist() == [[False, True, False], [True, False, True], [True, True, True]]
-    assert seen_past(points, c2w, np.zeros_like(alpha), box).all()
-    intr = np.tile([40.0, 40.0, 24.0, 24.0], (3, 1))
-    masks = [np.ones((48, 48), bool), np.zeros((48, 48), bool), np.zeros((48, 48), bool)]   # the wall fills view 0
-    assert outside_share(points[:1], c2w, intr, masks)[0] == pytest.approx(2 / 3)
-    assert outside_share(points[:1], c2w, intr, masks, seen[:, :1])[0] == 1.0
-
-
 def test_the_object_alone_step_cuts_a_skirt_under_the_belly_the_photos_do_not_show():
     """Planes fitted to a red body on two legs, a skirt in the floor band between the legs under the belly and a
     fin beside the body over the band; the photos show the body and legs alone over a textured ground. With

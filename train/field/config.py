@@ -121,10 +121,6 @@ class FitConfig:
                                            "its rule drops (nothing standing over them: a broad base on the "
                                            "ground) are kept when they fall outside the photos' silhouettes in "
                                            "fewer than this share of the views that see them; 0: off")
-    object_silhouette_seen: bool = config_field(True, "with --object-silhouette under 1: a photo votes on a floor-band "
-                                                "cell only where the object's cells above the band do not hide it "
-                                                "(silhouette.seen_past; --no-object-silhouette-seen: every photo "
-                                                "whose frame holds it)")
 
 
 @dataclass

@@ -154,7 +154,7 @@ def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray
 
 
 def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None, silhouette: float = 1.0,
-                 base_keep: float = 0.0, seen: bool = True):
+                 base_keep: float = 0.0):
     """planes (3, C, R, R) torch, fitted with the background model over posed.box; poses: the fit's pose corrections
     (V, 6) of posed.train, or None -> (the views to fit the object alone to: posed's training views at those poses,
     rendered with the object's cells only over white, at most TEACHER_SIZE pixels on the longer side, their colour
@@ -162,8 +162,7 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     their hull), or None when no cell is solid. With `silhouette` under 1, the object's cells that fall outside the
     photos' silhouettes in more than that share of the views (`silhouette.py`) are cut first, in the floor band; and
     with `base_keep` over 0, the floor band's solid cells that its rule drops are kept where they fall outside the
-    silhouettes in fewer than that share of the views (a broad base: the bunny's). With `seen`, a view votes on a
-    cell only where the object's cells above the band do not hide it (`silhouette.seen_past`)."""
+    silhouettes in fewer than that share of the views (a broad base: the bunny's)."""
     import cv2
     import torch
 
@@ -189,7 +188,7 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     if silhouette < 1:
         loose = object_cells(alpha, rgb, floor_band=0.0) if base_keep > 0 else None
         cells = _by_silhouettes(cells, loose, photos, np.clip(cover, 0.0, 1.0), c2w, intrinsics, box, silhouette,
-                                base_keep, alpha if seen else None)
+                                base_keep)
         keep = torch.from_numpy(cells).to(keep.device)
         views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     cover = np.clip(cover, 0.0, 1.0)
@@ -198,8 +197,7 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
                        name=posed.name), keep
 
 
-def _by_silhouettes(cells, loose, photos, cover, c2w, intrinsics, box, share: float, base_keep: float,
-                    alpha: np.ndarray | None = None):
+def _by_silhouettes(cells, loose, photos, cover, c2w, intrinsics, box, share: float, base_keep: float):
     """The object's cells (G, G, G) bool after the photos' silhouettes (GrabCut started from the views' opacity
     `cover`): over the floor band as they are; in it, those that fall outside the silhouettes in at most `share` of
     the views that see them, and those of `loose` (the cells without the band's rule, or None) that fall outside in
@@ -207,27 +205,17 @@ def _by_silhouettes(cells, loose, photos, cover, c2w, intrinsics, box, share: fl
     the object's own (a grey teapot's spout and handle on a grey ground, spot's horns: -3.1 and -1.2 dB when cut at
     every height). A base that meets the ground along its whole outline (the bunny's) stands on no solid cell over
     the band's top, so the band's rule drops it; the photos hold it in nearly every view, where a shadow under a
-    belly falls outside the cut in side views. With `alpha` (G, G, G), the cells' one-cell opacity, a view votes
-    on a band cell only where the object's cells over the band do not hide it from that view (`seen_past`): behind
-    the object, a photo shows the object whether the cell is solid or not."""
+    belly falls outside the cut in side views."""
     from snapshot3d.carve import grid_centres
 
-    from .silhouette import outside_share, photo_silhouettes, seen_past
+    from .silhouette import outside_share, photo_silhouettes
 
     g = formats.OCC_RES
     band = math.ceil(FLOOR_BAND * g)
     masks = photo_silhouettes(photos, cover)
     centres = grid_centres(np.asarray(box, np.float64), g)[:, :, :band].reshape(-1, 3)
-    ask = (cells if loose is None else cells | loose)[:, :, :band].reshape(-1)
-    if alpha is None or not ask.any():
-        outside = outside_share(centres, c2w, intrinsics, masks)
-    else:   # only the band's candidates are judged (the rest keep 0, which changes nothing in band_vote)
-        above = np.where(cells, alpha, 0.0)
-        above[:, :, :band] = 0.0
-        outside = np.zeros(len(centres))
-        outside[ask] = outside_share(centres[ask], c2w, intrinsics, masks,
-                                     seen_past(centres[ask], c2w.astype(np.float64), above, box))
-    return band_vote(cells, loose, outside.reshape(g, g, band), share, base_keep)
+    return band_vote(cells, loose, outside_share(centres, c2w, intrinsics, masks).reshape(g, g, band), share,
+                     base_keep)
 
 
 def band_vote(cells: np.ndarray, loose: np.ndarray | None, outside: np.ndarray, share: float,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["photo_silhouettes", "outside_share", "seen_past", "GROW", "BAND", "ITERATIONS", "OPAQUE", "TOUCHED", "SEEN", "FAILED"]
+__all__ = ["photo_silhouettes", "outside_share", "GROW", "BAND", "ITERATIONS", "OPAQUE", "TOUCHED", "FAILED"]
 
 GROW = 0.015       # of the view's longer side: the cut is grown by this before the cells are judged (2 px at 128;
 #                    3 px kept the contact shadow's ring round a duck's or a teapot's base, 1 px cut spot's hooves)
@@ -19,7 +19,6 @@ BAND = 0.035       # of the longer side: round the planes' opacity, what GrabCut
 ITERATIONS = 5     # GrabCut's
 OPAQUE = 0.5       # the planes' opacity from which a pixel is probably the object's
 TOUCHED = 0.02     # ... and under which, farther than BAND from it, it is the background's for certain
-SEEN = 0.5         # a view votes on a cell when at least this much of the light from it passes the object
 FAILED = 0.5       # a cut that keeps less than this share of the opaque pixels failed (the photo does not show what
 #                    the planes do: a grey teapot's view, 0.22; the others 0.91 to 1), and its view does not vote
 
@@ -51,17 +50,15 @@ def photo_silhouettes(photos: np.ndarray, cover: np.ndarray) -> list:
     return out
 
 
-def outside_share(points: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, masks: list,
-                  visible: np.ndarray | None = None) -> np.ndarray:
+def outside_share(points: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, masks: list) -> np.ndarray:
     """points (M, 3) world, cameras c2w (N, 4, 4) OpenGL with intrinsics (N, 4) (pixel centres at +0.5), masks: N
-    (H, W) bool or None, visible: (N, M) bool, the views that see each point (`seen_past`), or None (all) -> (M,) the
-    share of the views with a mask, among those that see a point and in whose image it lies, in which it falls
-    outside the mask (0 where there is no such view)."""
+    (H, W) bool or None -> (M,) the share of the views with a mask, among those in whose image a point lies, in which
+    it falls outside the mask (0 where it lies in no such image)."""
     from snapshot3d.bundle import projection
 
     hom = np.c_[points, np.ones(len(points))]
     outside, seen = np.zeros(len(points)), np.zeros(len(points))
-    for i, (pose, intr, mask) in enumerate(zip(c2w, intrinsics, masks)):
+    for pose, intr, mask in zip(c2w, intrinsics, masks):
         if mask is None:
             continue
         x = hom @ projection(pose, intr).T
@@ -69,40 +66,6 @@ def outside_share(points: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, m
         z = np.where(front, x[:, 2], 1.0)
         u, v = np.floor(x[:, 0] / z), np.floor(x[:, 1] / z)
         ok = front & (u >= 0) & (v >= 0) & (u < mask.shape[1]) & (v < mask.shape[0])
-        if visible is not None:
-            ok &= visible[i]
         seen += ok
         outside[ok] += ~mask[v[ok].astype(int), u[ok].astype(int)]
     return outside / np.maximum(seen, 1)
-
-
-def seen_past(points: np.ndarray, c2w: np.ndarray, alpha: np.ndarray, box: np.ndarray,
-              min_transmittance: float = SEEN) -> np.ndarray:
-    """points (M, 3) world, cameras c2w (N, 4, 4) OpenGL, alpha (G, G, G) [ix, iy, iz] the one-cell opacity of what
-    may hide a point (the object's cells above the floor band) over world `box` (2, 3) -> (N, M) bool: the views in
-    which the light from each point passes those cells with at least `min_transmittance` left. A view in which a
-    cell lies behind the object shows the object there whether or not the cell is solid: it says nothing of it (a
-    frontal arc of views sees the ground behind the feet only from the arc's ends)."""
-    box = np.asarray(box, np.float64)
-    g = alpha.shape[0]
-    cell = (box[1] - box[0]) / g
-    depth = -np.log(np.clip(1.0 - alpha, 1e-6, 1.0))   # optical depth of one cell's length
-    out = np.zeros((len(c2w), len(points)), bool)
-    for i, pose in enumerate(c2w):
-        cam = pose[:3, 3]
-        seg = points - cam                                   # (M, 3): from the camera to each point
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t0 = np.where(seg != 0, (box[0] - cam) / seg, -np.inf)
-            t1 = np.where(seg != 0, (box[1] - cam) / seg, np.inf)
-        enter = np.clip(np.max(np.minimum(t0, t1), axis=1), 0.0, 1.0)   # where the segment enters the box
-        length = np.linalg.norm(seg / cell, axis=1)                       # the segment's length in cells
-        stop = 1.0 - 1.0 / np.maximum(length, 1.0)                        # a cell short of the point itself
-        n = int(np.ceil(2 * length.max() * (1 - enter.min()))) + 1        # half a cell apart
-        t = enter[:, None] + (stop - enter)[:, None] * (np.arange(n) + 0.5)[None] / n
-        idx = np.floor((cam + t[..., None] * seg[:, None] - box[0]) / cell).astype(int)
-        inside = np.all((idx >= 0) & (idx < g), axis=-1) & (stop > enter)[:, None]
-        idx = np.clip(idx, 0, g - 1)
-        step = np.maximum(stop - enter, 0.0) * length / n                 # each sample's share, in cells
-        tau = (depth[idx[..., 0], idx[..., 1], idx[..., 2]] * inside).sum(axis=1) * step
-        out[i] = np.exp(-tau) >= min_transmittance
-    return out
