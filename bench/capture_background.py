@@ -64,7 +64,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-bundle-box-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "box"}),
          "outer-bundle-fit": ("transforms.json", "outer", "auto", {"bundle": "fit"}),   # outer-capture before 12-06
          "outer-capture": ("transforms.json", "outer", "auto", {"refine_poses": "auto"}),
-         # the adjusted poses refined on by the planes from half the steps (docs/capture.md, the late start)
+         # the adjusted poses refined on by the planes from half the steps (docs/capture.md, the late start); by
+         # name, since 2026-12-06 what outer-capture does too
          "outer-capture-late": ("transforms.json", "outer", "auto", {"refine_poses": "on", "bundle": "fit",
                                                                      "pose_start": 0.5}),
          "outer-capture-nobasekeep": ("transforms.json", "outer", "auto", {"refine_poses": "auto",
