@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["orbit_cameras", "view_camera", "pixel_rays", "look_at", "orbit_poses", "focal_from_fov", "project"]
+__all__ = ["orbit_cameras", "view_camera", "pixel_rays", "look_at", "orbit_poses", "focal_from_fov", "project",
+           "azimuth_span_deg"]
 
 
 def focal_from_fov(fov_x_rad: float, width: int) -> float:
@@ -101,3 +102,13 @@ def view_camera(orbit, azimuth_deg: float, elevation_deg: float, distance: float
         raise UserError(f"distance {radius:g} is too close to the orbit's target for a camera")
     f = focal_from_fov(np.deg2rad(orbit.fov_deg), size)
     return c2w, np.array([[f, f, size / 2, size / 2]], np.float32)
+
+
+def azimuth_span_deg(c2w: np.ndarray, centre) -> float:
+    """Cameras c2w (N, 4, 4) round `centre` (3,), z up -> the degrees of azimuth their positions span round it: 360
+    less the widest gap between neighbours on the circle (0 for fewer than two cameras)."""
+    rel = np.asarray(c2w, np.float64)[:, :2, 3] - np.asarray(centre, np.float64)[:2]
+    if len(rel) < 2:
+        return 0.0
+    az = np.sort(np.degrees(np.arctan2(rel[:, 1], rel[:, 0])))
+    return float(360.0 - np.diff(np.r_[az, az[0] + 360.0]).max())

@@ -26,7 +26,7 @@ import numpy as np
 from .bundle import BundleConfig, adjust_poses, loose_matches, pair_points, projection, tracks
 
 __all__ = ["SparseBoxConfig", "features", "points_from_matches", "sparse_points", "adjusted_poses", "find_ground",
-           "box_from_points", "sparse_box"]
+           "box_from_points", "ground_pixels", "sparse_box"]
 
 
 @dataclass(frozen=True)
@@ -98,16 +98,34 @@ def features(images: np.ndarray, c2w: np.ndarray, cfg: SparseBoxConfig = SparseB
 
 
 def points_from_matches(keypoints: list, matches: list, c2w: np.ndarray, intrinsics: np.ndarray,
-                        cfg: SparseBoxConfig = SparseBoxConfig()) -> np.ndarray:
+                        cfg: SparseBoxConfig = SparseBoxConfig(), with_pixels: bool = False):
     """`features`' keypoints and matches, c2w (N, 4, 4) OpenGL, intrinsics (N, 4) -> (M, 3) float64 world points,
-    one a match, kept where they reproject within reproj_px in both frames with min_parallax_deg between the rays."""
-    proj, out = [projection(c, k) for c, k in zip(c2w, intrinsics)], []
+    one a match, kept where they reproject within reproj_px in both frames with min_parallax_deg between the rays;
+    with `with_pixels`, also where each was seen: (M, 2, 3) float64, (frame, x, y) in each of its two frames
+    (`features`' pixel convention)."""
+    proj, out, seen = [projection(c, k) for c, k in zip(c2w, intrinsics)], [], []
     for i, j, a, b in matches:
         pts, ok = pair_points(proj[i], proj[j], keypoints[i][a].T, keypoints[j][b].T, cfg.reproj_px)
         u, v = pts - c2w[i, :3, 3], pts - c2w[j, :3, 3]
         cos = (u * v).sum(1) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-12)
-        out.append(pts[ok & (cos < np.cos(np.radians(cfg.min_parallax_deg)))])
-    return np.concatenate(out) if out else np.zeros((0, 3))
+        keep = ok & (cos < np.cos(np.radians(cfg.min_parallax_deg)))
+        out.append(pts[keep])
+        seen.append(np.stack([np.column_stack([np.full(int(keep.sum()), f, np.float64), keypoints[f][k][keep]])
+                              for f, k in ((i, a), (j, b))], axis=1))
+    points = np.concatenate(out) if out else np.zeros((0, 3))
+    return (points, np.concatenate(seen) if seen else np.zeros((0, 2, 3))) if with_pixels else points
+
+
+def ground_pixels(points: np.ndarray, seen: np.ndarray, plane, band: float, size: tuple) -> np.ndarray:
+    """points (M, 3) world, where each was seen (M, 2, 3) (`points_from_matches`), the ground plane z = a x + b y + c
+    and its band's half-width -> (K, 3) int64 (frame, row, col), unique, of the pixels of frames of `size`
+    (height, width) that show a point within the band of the ground: their rays pass the box above the ground."""
+    a, b, c = plane
+    on = np.abs(points[:, 2] - a * points[:, 0] - b * points[:, 1] - c) <= band
+    px = seen[on].reshape(-1, 3)
+    frame, col, row = px[:, 0].astype(np.int64), np.floor(px[:, 1]).astype(np.int64), np.floor(px[:, 2]).astype(np.int64)
+    ok = (row >= 0) & (row < size[0]) & (col >= 0) & (col < size[1])
+    return np.unique(np.column_stack([frame, row, col])[ok], axis=0)
 
 
 def sparse_points(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray,
@@ -200,7 +218,13 @@ def sparse_box(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, box:
     c2w, adjusted = np.asarray(c2w, np.float64), None
     if cfg.bundle:
         c2w, adjusted = adjusted_poses(keypoints, matches, c2w, intrinsics)
-    out, info = box_from_points(points_from_matches(keypoints, matches, c2w, intrinsics, cfg), box, cfg)
+    points, seen = points_from_matches(keypoints, matches, c2w, intrinsics, cfg, with_pixels=True)
+    out, info = box_from_points(points, box, cfg)
+    if out is not None:   # the pixels that show the ground, for the fit (fit --seen-ground-weight); their rays are
+        # empty above the band's top, with the band's width again to spare (a feature on the object's own base)
+        band = info["ground_band"] * cfg.tolerance * float((np.asarray(box)[1] - np.asarray(box)[0]).max()) / 2
+        info.update(ground_pixels=ground_pixels(points, seen, info["ground_plane"], band, images.shape[1:3]),
+                    ground_clear=round(2 * band, 4))
     return out, {**info, **({"bundle": adjusted} if adjusted else {})}, c2w
 
 
@@ -223,7 +247,8 @@ def box_from_points(points: np.ndarray, box: np.ndarray,
         above = float(np.quantile(under, cfg.scatter_quantile))
     obj = _clustered(points[inside & (height > above)], cfg.knn_radius * half, cfg)
     info.update(sparse_ground=round(ground_z, 4), ground_points=int(on_ground.sum()), object_points=int(len(obj)),
-                ground_tilt_deg=round(float(np.degrees(np.arctan(np.hypot(a, b)))), 2), ground_band=factor)
+                ground_tilt_deg=round(float(np.degrees(np.arctan(np.hypot(a, b)))), 2), ground_band=factor,
+                ground_plane=[float(a), float(b), float(c)])
     if len(obj) < cfg.min_points:
         return None, info
     lo, hi = np.quantile(obj, cfg.quantile, axis=0), np.quantile(obj, 1 - cfg.quantile, axis=0)

@@ -160,8 +160,9 @@ def object_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tupl
     from .fit import fit
     from .object_carve import object_cells
     t0 = time.perf_counter()
+    # without the rays that show the ground: their penalty cost spot's frontal arc half its body in this short fit
     pre = replace(cfg, steps=max(10, round(cfg.steps * cfg.object_box)), background="outer", qat_fraction=0.0,
-                  channel_fraction=0.0, object_steps=0.0)
+                  channel_fraction=0.0, object_steps=0.0, seen_ground_weight=0.0)
     res = fit(posed, decoder, pre, device=device)
     alpha, rgb = cell_alpha(res.state.planes.planes.detach(), decoder, posed.box, GRID, with_rgb=True)
     box = cells_box(object_cells(alpha, rgb), posed.box)

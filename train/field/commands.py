@@ -31,6 +31,11 @@ __all__ = ["fit_scene", "resolve_autos", "fit_command", "render_command", "mesh_
 # earliest (refined early, on planes still blurred, they move away from the truth; 7 noisy composites x 3 fits,
 # docs/capture.md "The late start, side by side")
 ADJUSTED_POSE_START = 0.5
+# --seen-ground-weight auto: this weight where the training cameras span less than SEEN_GROUND_SPAN_DEG of azimuth
+# round the box (measured at 120 deg: floaters 7 of 7 under 2%; on two full turns it cost 0.4-2.6 dB and took no
+# floaters away; docs/capture.md "The rays that show the ground")
+SEEN_GROUND_WEIGHT = 0.3
+SEEN_GROUND_SPAN_DEG = 180.0
 
 
 def _bar(desc: str, total: int):
@@ -161,11 +166,21 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     return scene, report, ev["renders"]
 
 
+def seen_ground_auto(cfg: FitConfig, c2w: np.ndarray, centre) -> tuple[FitConfig, float]:
+    """cfg with --seen-ground-weight -1 (auto) resolved for training cameras c2w (T, 4, 4) round the box's `centre`:
+    SEEN_GROUND_WEIGHT where their azimuths span less than SEEN_GROUND_SPAN_DEG, else 0; and that span in degrees."""
+    from snapshot3d.cameras import azimuth_span_deg
+    span = azimuth_span_deg(c2w, centre)
+    if cfg.seen_ground_weight == -1:
+        cfg = replace(cfg, seen_ground_weight=SEEN_GROUND_WEIGHT if span < SEEN_GROUND_SPAN_DEG else 0.0)
+    return cfg, span
+
+
 def _tightened(posed, decoder, cfg, device, quiet: bool, late_start: bool = False):
     """`posed` in the automatic box tightened from a short fit's density (train/field/box_tighten.py), its
     capture account updated; what the tightening found; and cfg, where the training poses were adjusted to the
     photos' matches and `late_start` (--refine-poses auto), its pose corrections starting at ADJUSTED_POSE_START
-    of the steps at the earliest."""
+    of the steps at the earliest, and its --seen-ground-weight auto resolved (`seen_ground_auto`)."""
 
     from .box_tighten import object_box, tighten_box
     box, info, adjusted = tighten_box(posed, decoder, cfg, device)
@@ -175,10 +190,18 @@ def _tightened(posed, decoder, cfg, device, quiet: bool, late_start: bool = Fals
         posed = replace(posed, c2w=c2w)
         if late_start:   # refined early, on planes still blurred, they move away from the truth (docs/capture.md)
             cfg = replace(cfg, pose_start=max(cfg.pose_start, ADJUSTED_POSE_START))
+    cfg, span = seen_ground_auto(cfg, posed.c2w[posed.train], box.mean(0))
+    info.update(azimuth_span_deg=round(span, 1), seen_ground_weight=cfg.seen_ground_weight)
     read = posed.info["capture"]
     ground = f", the ground at z = {info['ground_z']:.3g}" if info["ground_z"] is not None else ""
     ground += ", sides and top cut" if info.get("sides_cut") else ""
-    info_ground = {**posed.info, "ground_z": info["ground_z"], "ground_depth": info.get("ground_depth", 0.0)}
+    if cfg.seen_ground_weight > 0 and info.get("ground_pixels") is not None:
+        ground += (f", the {len(info['ground_pixels'])} pixels that show the ground kept clear (weight "
+                   f"{cfg.seen_ground_weight:g}; the cameras span {span:.0f} deg)")
+    info_ground = {**posed.info, "ground_z": info["ground_z"], "ground_depth": info.get("ground_depth", 0.0),
+                   # the pixels that show the ground (K, 3) (train frame, row, col), not reported; the plane under them
+                   "ground_pixels": info.pop("ground_pixels", None), "ground_plane": info.get("ground_plane"),
+                   "ground_clear": info.get("ground_clear")}
     if info["ground_z"] is not None and cfg.object_box > 0 and cfg.object_steps > 0:   # round the object's cells
         box, more = object_box(replace(posed, box=box, info=info_ground), decoder, cfg, device)
         info.update(more)

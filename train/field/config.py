@@ -82,6 +82,12 @@ class FitConfig:
                                       "near the box's side walls and top (not its floor)")
     floor_weight: float = config_field(0.0, "with --background outer: weight of a density penalty in the box's floor "
                                        "band where nothing stands above it (the ground left over the ground cut)")
+    seen_ground_weight: float = config_field(-1.0, "with --background outer and the ground found from the photos' "
+                                             "sparse points: weight of the planes' opacity along the rays of the "
+                                             "pixels where a matched feature lies on the ground, which cross the box "
+                                             "empty (train/field/seen_ground.py); -1: auto, 0.3 where the training "
+                                             "cameras span less than half a turn round the object (a frontal arc: "
+                                             "fewer floaters), else 0 (docs/capture.md; a fit's core treats -1 as 0)")
     wall_margin: float = config_field(0.15, "with --background outer: depth of the walls' and the floor's bands, a "
                                       "fraction of the box's half-size (at most 0.25)")
     refine_poses: str = config_field("auto", "learn a small correction of each training view's pose with the "
@@ -164,6 +170,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("background-samples", cfg.background_samples >= 2, ">= 2"),
         ("ground-texture", 0 <= cfg.ground_texture <= 1024, "in 0..1024"),
         ("ground-depth", cfg.ground_depth >= 0 or cfg.ground_depth == -1, ">= 0, or -1 (where the ground is)"),
+        ("seen-ground-weight", cfg.seen_ground_weight >= 0 or cfg.seen_ground_weight == -1, ">= 0, or -1 (auto)"),
         ("object-steps", 0 <= cfg.object_steps <= 4, "in [0, 4]"),
         ("object-box", 0 <= cfg.object_box <= 1, "in [0, 1]"),
         ("object-silhouette", 0 <= cfg.object_silhouette <= 1, "in [0, 1]"),

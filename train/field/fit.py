@@ -53,6 +53,8 @@ class FitState:
     pose_opt: torch.optim.Optimizer | None = None
     head: torch.nn.Module | None = None
     """`head.HeadDecoder`, the decoder with the scene's own last layer (in `opt`), with cfg.head "on", else None"""
+    ground: object | None = None
+    """`seen_ground.GroundRays`: the bank's rays that show the ground, with cfg.seen_ground_weight, else None"""
 
 
 @dataclass
@@ -101,7 +103,16 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
         pose_opt = torch.optim.Adam(poses.parameters(), lr=cfg.pose_lr)
     return FitState(planes, occ, frame, make_rays(posed, posed.train, frame, cfg.random_background).to(device), opt,
                     channel=new_state_channel(cfg, device), background=bg, bg_opt=bg_opt, poses=poses,
-                    pose_opt=pose_opt)
+                    pose_opt=pose_opt, ground=_ground_rays(posed, cfg, bg is not None))
+
+
+def _ground_rays(posed: PosedImages, cfg: FitConfig, outer: bool):
+    """`seen_ground.ground_rays` of posed, where cfg.seen_ground_weight and the background model ask for them and
+    the sparse box found them, else None."""
+    if not outer or cfg.seen_ground_weight <= 0:
+        return None
+    from .seen_ground import ground_rays
+    return ground_rays(posed.info, posed.height, posed.width)
 
 
 def new_state_channel(cfg: FitConfig, device=None) -> tuple | None:
@@ -187,6 +198,8 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
     loss = mse + cfg.tv_weight * _tv(st.planes.planes) if cfg.tv_weight else mse
     if bg_terms is not None:
         loss = loss + bg_terms
+    if st.ground is not None:   # pixels that show the ground: their rays pass the box empty
+        loss = loss + cfg.seen_ground_weight * _seen_ground_opacity(st, planes, decoder, occ, cfg.batch_rays // 8, gen)
     if cfg.empty_weight and st.occ.outside_hull:
         loss = loss + cfg.empty_weight * empty_alpha(density_fn(planes, decoder), st.occ.hull, st.frame,
                                                      cfg.batch_rays // 2, gen)
@@ -212,6 +225,17 @@ def train_step(st: FitState, decoder, cfg: FitConfig, gen: torch.Generator, extr
         st.occ.update(density_fn(st.planes.planes.detach(), decoder), st.frame.step, gen)
     st.train_seconds += time.perf_counter() - t0
     return float(mse.detach())
+
+
+def _seen_ground_opacity(st: FitState, planes: torch.Tensor, decoder, occ, n: int, gen: torch.Generator) -> torch.Tensor:
+    """Mean opacity of the planes (`seen_ground.clear_opacity`) along n of st.ground's rays drawn at random, at the
+    refined poses."""
+    from .seen_ground import clear_opacity
+    k = st.ground.index[torch.randint(len(st.ground.index), (n,), generator=gen)].to(st.bank.rgb.device)
+    o, d = st.bank.origins[k], st.bank.dirs[k]
+    if st.poses is not None:
+        o, d = st.poses(st.bank.view[k], o, d)
+    return clear_opacity(planes, decoder, st.frame, occ, o, d, st.ground.plane, st.ground.clear, gen).mean()
 
 
 def _save_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, scene: str):
