@@ -52,7 +52,7 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-sides-walls-floor": ("transforms.json", "outer", "auto", {**_SIDES_WALLS, "floor_weight": 1.0}),
          "outer-ground": ("transforms.json", "outer", "auto", {"ground_texture": 128, "ground_depth": 0.0}),
          "outer-ground-low": ("transforms.json", "outer", "auto", {"ground_texture": 128, "ground_depth": 0.05}),
-         # the rays that show the ground, weighted (auto: 0.3 on an arc under half a turn, else 0; docs/capture.md)
+         # the rays that show the ground, weighted (auto: 0.3 where the cameras span under 300 deg, else 0; docs/capture.md)
          "outer-noseen": ("transforms.json", "outer", "auto", {"seen_ground_weight": 0.0}),
          "outer-seen": ("transforms.json", "outer", "auto", {"seen_ground_weight": 0.1}),
          "outer-seen-03": ("transforms.json", "outer", "auto", {"seen_ground_weight": 0.3}),

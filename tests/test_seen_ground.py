@@ -128,18 +128,19 @@ def test_the_cameras_azimuth_span_is_360_less_the_widest_gap():
     assert azimuth_span_deg(ring([40]), (0.5, -0.2, 0.0)) == 0.0
 
 
-def test_the_weight_is_on_by_itself_on_a_frontal_arc_and_off_on_a_walk_round():
-    """--seen-ground-weight -1 (auto): make-capture's walk of 120 deg gets SEEN_GROUND_WEIGHT, its default two turns 0;
-    a weight given stays as given; -1 and >= 0 are the only values taken, in one line."""
+def test_the_weight_is_on_by_itself_on_an_arc_and_off_on_a_walk_round():
+    """--seen-ground-weight -1 (auto): make-capture's walks of 120 and 240 deg get SEEN_GROUND_WEIGHT, its default two
+    turns 0; a weight given stays as given; -1 and >= 0 are the only values taken, in one line."""
     from snapshot3d.errors import UserError
     from snapshot3d.synth_camera import walk_poses
     from snapshot3d.train.field.commands import SEEN_GROUND_WEIGHT, seen_ground_auto
     from snapshot3d.train.field.config import FitConfig, check_fit_config
     centre = np.array([0.1, 0.0, -0.2])
-    arc = walk_poses(42, centre, 1.0, 2.0, np.random.default_rng(3), arc=np.radians(120))
     walk = walk_poses(42, centre, 1.0, 2.0, np.random.default_rng(3))
-    cfg, span = seen_ground_auto(FitConfig(), arc, centre)
-    assert cfg.seen_ground_weight == SEEN_GROUND_WEIGHT > 0 and 100 < span < 125
+    for degrees in (120, 240):
+        arc = walk_poses(42, centre, 1.0, 2.0, np.random.default_rng(3), arc=np.radians(degrees))
+        cfg, span = seen_ground_auto(FitConfig(), arc, centre)
+        assert cfg.seen_ground_weight == SEEN_GROUND_WEIGHT > 0 and degrees - 20 < span < degrees + 5, (degrees, span)
     cfg, span = seen_ground_auto(FitConfig(), walk, centre)
     assert cfg.seen_ground_weight == 0.0 and span > 340
     assert seen_ground_auto(FitConfig(seen_ground_weight=0.5), walk, centre)[0].seen_ground_weight == 0.5

@@ -86,7 +86,7 @@ class FitConfig:
                                              "sparse points: weight of the planes' opacity along the rays of the "
                                              "pixels where a matched feature lies on the ground, which cross the box "
                                              "empty (train/field/seen_ground.py); -1: auto, 0.3 where the training "
-                                             "cameras span less than half a turn round the object (a frontal arc: "
+                                             "cameras span less than 300 deg round the object (a frontal arc: "
                                              "fewer floaters), else 0 (docs/capture.md; a fit's core treats -1 as 0)")
     wall_margin: float = config_field(0.15, "with --background outer: depth of the walls' and the floor's bands, a "
                                       "fraction of the box's half-size (at most 0.25)")
