@@ -220,9 +220,9 @@ def sparse_box(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, box:
         c2w, adjusted = adjusted_poses(keypoints, matches, c2w, intrinsics)
     points, seen = points_from_matches(keypoints, matches, c2w, intrinsics, cfg, with_pixels=True)
     out, info = box_from_points(points, box, cfg)
+    band = info.pop("ground_band_width", None)
     if out is not None:   # the pixels that show the ground, for the fit (fit --seen-ground-weight); their rays are
         # empty above the band's top, with the band's width again to spare (a feature on the object's own base)
-        band = info["ground_band"] * cfg.tolerance * float((np.asarray(box)[1] - np.asarray(box)[0]).max()) / 2
         info.update(ground_pixels=ground_pixels(points, seen, info["ground_plane"], band, images.shape[1:3]),
                     ground_clear=round(2 * band, 4))
     return out, {**info, **({"bundle": adjusted} if adjusted else {})}, c2w
@@ -248,7 +248,7 @@ def box_from_points(points: np.ndarray, box: np.ndarray,
     obj = _clustered(points[inside & (height > above)], cfg.knn_radius * half, cfg)
     info.update(sparse_ground=round(ground_z, 4), ground_points=int(on_ground.sum()), object_points=int(len(obj)),
                 ground_tilt_deg=round(float(np.degrees(np.arctan(np.hypot(a, b)))), 2), ground_band=factor,
-                ground_plane=[float(a), float(b), float(c)])
+                ground_plane=[float(a), float(b), float(c)], ground_band_width=factor * cfg.tolerance * half)
     if len(obj) < cfg.min_points:
         return None, info
     lo, hi = np.quantile(obj, cfg.quantile, axis=0), np.quantile(obj, 1 - cfg.quantile, axis=0)

@@ -9,6 +9,7 @@ import math
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -26,6 +27,9 @@ from .occupancy import OccupancyGrid
 from .rays import RayBank, make_rays, recomposite
 from .render import density_fn, render_rays
 from .sampler import BoxFrame
+
+if TYPE_CHECKING:
+    from .seen_ground import GroundRays
 
 __all__ = ["FitConfig", "FitState", "new_state", "train_step", "fit", "FitResult", "empty_alpha"]
 
@@ -53,7 +57,7 @@ class FitState:
     pose_opt: torch.optim.Optimizer | None = None
     head: torch.nn.Module | None = None
     """`head.HeadDecoder`, the decoder with the scene's own last layer (in `opt`), with cfg.head "on", else None"""
-    ground: object | None = None
+    ground: GroundRays | None = None
     """`seen_ground.GroundRays`: the bank's rays that show the ground, with cfg.seen_ground_weight, else None"""
 
 
