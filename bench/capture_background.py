@@ -99,8 +99,9 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = No
 
     name, background, box, fields = MODES[mode]
     t0 = time.perf_counter()
-    scene, report, renders = fit_scene(str(cap / name), replace(cfg, background=background, **{"refine_poses": "off", **fields}), quiet=True,
-                                 capture=CaptureOptions(up=(0.0, 0.0, 1.0), box=box))
+    fitted = fit_scene(str(cap / name), replace(cfg, background=background, **{"refine_poses": "off", **fields}),
+                       quiet=True, capture=CaptureOptions(up=(0.0, 0.0, 1.0), box=box))
+    scene, report, renders = fitted.scene, fitted.report, fitted.renders
     seconds = time.perf_counter() - t0
     true_poses = cap / "gt/transforms_true.json"   # absent in captures written before it was
     truth = load_scene(str(true_poses if true_poses.is_file() else cap / "gt/transforms_masked.json"),
@@ -109,7 +110,7 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = No
     decoder = load_decoder(cfg.decoder)
     score = score_object(torch.from_numpy(scene.planes()), decoder, scene.box, truth, true_box)
     written = load_scene(str(cap / name), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
-    at = {"written": written.c2w[written.train], "fit": report.pop("_train_c2w")}
+    at = {"written": written.c2w[written.train], "fit": fitted.train_c2w}
     true_c2w, intrinsics = truth.c2w[truth.train], truth.intrinsics[truth.train]
     poses = {f"pose_px_{k}": pose_error(c2w, true_c2w, intrinsics, true_box)["px_median"] for k, c2w in at.items()}
     if figure is not None and renders is not None:   # the photos as read (the capture's own file, not the masked)

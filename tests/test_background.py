@@ -87,8 +87,8 @@ def _share_outside(capture, background):
     from snapshot3d.train.field.decoder import load_decoder
     from snapshot3d.train.field.object_score import density_share_outside_box
     cfg = FitConfig(steps=60, batch_rays=1024, plane_res=32, plane_channels=4, occ_warmup=16, background=background)
-    scene, _, _ = fit_scene(str(capture / "transforms.json"), cfg, quiet=True,
-                            capture=CaptureOptions(up=(0.0, 0.0, 1.0), box="auto" if background == "outer" else None))
+    scene = fit_scene(str(capture / "transforms.json"), cfg, quiet=True,
+                      capture=CaptureOptions(up=(0.0, 0.0, 1.0), box="auto" if background == "outer" else None)).scene
     true_box = json.loads((capture / "gt/truth.json").read_text())["box"]
     return density_share_outside_box(torch.from_numpy(scene.planes()), load_decoder(), scene.box, true_box)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +23,7 @@ from snapshot3d.validate import MESH_RES, SCENE_MAX_RES, VIEW_SIZE, check_views,
 from .config import FitConfig, check_fit_config
 from .curves import payload_hint
 
-__all__ = ["fit_scene", "resolve_autos", "fit_command", "render_command", "mesh_command", "train_decoder_command",
+__all__ = ["Fitted", "fit_scene", "resolve_autos", "fit_command", "render_command", "mesh_command", "train_decoder_command",
            "orbit_cameras", "render_scene"]
 
 
@@ -75,15 +75,26 @@ def resolve_autos(cfg: FitConfig, layout: str | None, medium: str | None) -> Fit
     return cfg
 
 
+@dataclass(frozen=True)
+class Fitted:
+    """What `fit_scene` returns. `renders`: the held-out views (V, H, W, 3) RGB, None with --budget auto.
+    `train_c2w` (T, 4, 4): the training poses the fit ended with (adjusted and refined where it did so), for the
+    benches; `throughput`: {"rays_per_s", "samples_per_s"}. Both None with --budget auto."""
+    scene: Scene
+    report: dict
+    renders: np.ndarray | None
+    train_c2w: np.ndarray | None = None
+    throughput: dict | None = None
+
+
 def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int = 1, checkpoint=None,
               size: int = 200, quiet: bool = False, device=None, medium: str | None = None, capture=None,
-              channel=None):
+              channel=None) -> Fitted:
     """Load (`capture`: snapshot3d.capture.CaptureOptions, the split, box, up axis and size limit), fit (on
-    `device`: a torch.device, a --device name, or None: the CPU) and evaluate. Returns (Scene, report dict,
-    held-out renders). The capture is loaded before torch is imported, so that a wrong path fails at once;
-    one line says what was read. `channel`: the print channel's model the budget predicts with (None: the
-    `moderate` one). With --budget fixed the report's `_train_c2w` (V, 4, 4) holds the training poses the fit
-    ended with (adjusted and refined where it did so), for the benches; `fit` drops it."""
+    `device`: a torch.device, a --device name, or None: the CPU) and evaluate. Returns a `Fitted`: the scene, its
+    report and the held-out renders. The capture is loaded before torch is imported, so that a wrong path fails at
+    once; one line says what was read. `channel`: the print channel's model the budget predicts with (None: the
+    `moderate` one)."""
     from snapshot3d.capture import describe
     from snapshot3d.loaders import load_scene
     from snapshot3d.scene import dequantize_planes
@@ -119,6 +130,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
     report = {"background_mode": chose} if chose and not spec.startswith("builtin:") else {}
     if cfg.background == "outer" and read and str(read.get("box_from", "")).startswith("auto"):
         posed, report["background"], cfg = _tightened(posed, decoder, cfg, device, quiet, late_start)
+    train_c2w = throughput = None
     if budget == "auto":
         chosen, rungs = fit_ladder(posed, decoder, cfg, log=log, progress_factory=bars, device=device, medium=medium,
                                    channel=channel)
@@ -136,7 +148,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         codes, steps, head = res.codes, cfg.steps, res.head
         ev = evaluate_planes(dequantize_planes(codes), with_head(decoder, head), posed, background=res.state.background,
                              samples=cfg.background_samples)
-        report["_throughput"] = {"rays_per_s": res.state.rays / max(res.seconds, 1e-9),
+        throughput = {"rays_per_s": res.state.rays / max(res.seconds, 1e-9),
                                  "samples_per_s": res.state.samples / max(res.seconds, 1e-9)}
         train_c2w = posed.c2w[posed.train]   # (V, 4, 4): the poses the fit ended with, for the benches
         if res.state.poses is not None:
@@ -144,7 +156,6 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
             from .pose_refine import pose_summary
             report["pose_refinement"] = pose_summary(res.state.poses.params, res.state.frame.scale)
             train_c2w = refined_c2w(train_c2w, res.state.poses.params.detach().cpu().numpy(), res.state.frame.scale)
-        report["_train_c2w"] = train_c2w
     else:
         raise UserError(f"--budget must be 'fixed' or 'auto', not {budget!r}")
     seconds = time.perf_counter() - t0
@@ -163,7 +174,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
             report["field_psnr_on"] += (", on the object's own pixels (the planes' opacity >= 0.5), the background "
                                         "model behind them")
         report["capture"] = read
-    return scene, report, ev["renders"]
+    return Fitted(scene, report, ev["renders"], train_c2w, throughput)
 
 
 def seen_ground_auto(cfg: FitConfig, c2w: np.ndarray, centre) -> tuple[FitConfig, float]:
@@ -241,12 +252,11 @@ def fit_command(args) -> int:
         box = "auto"
     capture = CaptureOptions(holdout=getattr(args, "holdout", None), box=box,
                              up=parse_up(getattr(args, "up", None)), max_size=getattr(args, "max_size", None))
-    scene, report, _ = fit_scene(args.scene, cfg, args.budget, args.downscale, ckpt, size=args.size,
-                                 device=args.device, medium=args.medium, capture=capture, channel=channel)
+    fitted = fit_scene(args.scene, cfg, args.budget, args.downscale, ckpt, size=args.size,
+                       device=args.device, medium=args.medium, capture=capture, channel=channel)
+    scene, report, throughput = fitted.scene, fitted.report, fitted.throughput
     if channel_info is not None:
         report["channel"] = channel_info
-    throughput = report.pop("_throughput", None)
-    report.pop("_train_c2w", None)
     save_scene(scene, out)
     if ckpt is not None and ckpt.exists():
         ckpt.unlink()
