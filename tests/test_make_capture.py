@@ -122,15 +122,21 @@ def test_pose_noise_has_the_rms_asked():
 @pytest.mark.parametrize("arc_deg", [720.0, 120.0])
 def test_the_walk_turns_the_arc_asked(arc_deg):
     """--arc-deg: the cameras' azimuths round the object step evenly through the arc (two turns by default, a
-    frontal arc on request), whatever the hand-held wobble; the default walk is the one written before the option."""
+    frontal arc on request), whatever the hand-held wobble."""
     n, centre = 48, np.array([0.1, -0.2, 0.3])
     c2w = walk_poses(n, centre, 1.0, 1.5, np.random.default_rng(3), np.deg2rad(arc_deg))
     rel = c2w[:, :3, 3] - centre
     az = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]))
     assert abs(np.degrees(az[-1] - az[0]) - arc_deg * (n - 1) / n) < 0.5
     assert np.all(np.diff(az) > 0)
-    if arc_deg == 720.0:
-        assert np.array_equal(c2w, walk_poses(n, centre, 1.0, 1.5, np.random.default_rng(3)))
+
+
+def test_the_default_walk_is_two_turns_and_the_one_written_before_the_option():
+    n, centre = 48, np.array([0.1, -0.2, 0.3])
+    two_turns = walk_poses(n, centre, 1.0, 1.5, np.random.default_rng(3), np.deg2rad(720.0))
+    assert np.array_equal(two_turns, walk_poses(n, centre, 1.0, 1.5, np.random.default_rng(3)))
+    arc = walk_poses(n, centre, 1.0, 1.5, np.random.default_rng(3), np.deg2rad(120.0))
+    assert not np.allclose(two_turns, arc)
 
 
 def test_cli_writes_a_capture_and_falls_back_to_bundled_photos(tmp_path, monkeypatch):
