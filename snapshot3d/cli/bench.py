@@ -121,6 +121,14 @@ def add_commands(sub) -> None:
                     "fits: held-out input photos, the fit with its background model, the object alone")
     _quick(bg, size=48, views=8, steps=20)
 
+    bs = add(bsub, "capture-summary", "issue 40's targets by the medians over fit seeds, from bench "
+                                      "capture-background results files (no fitting): per capture and "
+                                      "--seen-ground-weight, the object's gap to the masked fit and the floaters",
+             _run("snapshot3d.bench.capture_summary", "bench_capture_summary_command"))
+    _out(bs)
+    bs.add_argument("files", nargs="+", help="capture-background results (.json), the masked fits' among them")
+    bs.add_argument("--name", default="capture_summary", help="results file name (without .json/.csv/.png)")
+
     bv = add(bsub, "serve", "snapshot3d serve under concurrent uploads (answers, latency, memory, /render) and the "
                             "page in headless Chromium (first view, frame rate, screenshots)",
              _run("snapshot3d.bench.serve", "bench_serve_command"))

@@ -1,0 +1,144 @@
+"""`snapshot3d bench capture-summary`: issue 40's two targets by the medians over fit seeds, read from the
+results files of `bench capture-background` (no fitting). Each capture (mesh, capture seed, walk's arc, pose
+noise) and setting of `--seen-ground-weight` gets the medians of its fits' object PSNR and opacity outside the
+true mask + 2 px; the masked fits of the same capture give the bound. One fit that appears in two files (the
+same capture, setting and fit seed) counts once."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from snapshot3d.errors import UserError
+
+from .common import pyplot, run_metadata, write_rows
+
+__all__ = ["GAP_DB", "OUTSIDE", "fit_rows", "summary_rows", "bench_capture_summary_command"]
+
+GAP_DB = -1.5     # the object within 1.5 dB of the masked fit (issue 40)
+OUTSIDE = 0.02    # at most 2% of the opacity outside the true mask + 2 px
+
+
+def _weight(row: dict) -> float | None:
+    """The row's --seen-ground-weight as fitted: its own record, else its mode's setting, else 0 (rows written
+    before the option existed). None for a masked fit."""
+    from .capture_background import MODES
+    if MODES.get(row["mode"], ("", "white"))[1] != "outer":
+        return None
+    if row.get("seen_ground_weight") is not None:
+        return float(row["seen_ground_weight"])
+    return float(MODES[row["mode"]][3].get("seen_ground_weight", 0.0))
+
+
+def fit_rows(paths: list[Path]) -> list[dict]:
+    """The fits of `paths` (capture-background JSON), each with its capture's key and setting, duplicates
+    dropped; a one-line error for a file that is not such a result."""
+    fits, seen = [], set()
+    for path in paths:
+        try:
+            report = json.loads(Path(path).read_text())
+            capture, rows = report["capture"], report["rows"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise UserError(f"{path}: not a bench capture-background result ({type(exc).__name__}: {exc})") from None
+        for row in rows:
+            key = (row["mesh"], capture["seed"], float(capture.get("arc_deg", 720.0)),
+                   float(capture.get("pose_noise_deg", 0.0)), float(capture.get("pose_noise_frac", 0.0)))
+            weight = _weight(row)
+            fit_seed = row.get("fit_seed", capture["seed"])
+            if (key, weight, row["mode"] == "masked", fit_seed) in seen:
+                continue
+            seen.add((key, weight, row["mode"] == "masked", fit_seed))
+            fits.append({"key": key, "weight": weight, "masked": row["mode"] == "masked", "fit_seed": fit_seed,
+                         "object_psnr": row["object_psnr"], "outside": row["opacity_outside_2px"],
+                         "file": Path(path).name})
+    return fits
+
+
+def summary_rows(fits: list[dict]) -> list[dict]:
+    """One row per capture and weight: the fits' seeds, the medians, the masked bound and the two targets.
+    Captures without a masked fit get no gap."""
+    rows = []
+    for key in dict.fromkeys(f["key"] for f in fits):
+        masked = [f["object_psnr"] for f in fits if f["key"] == key and f["masked"]]
+        bound = float(np.median(masked)) if masked else None
+        weights = sorted({f["weight"] for f in fits if f["key"] == key and not f["masked"]})
+        for w in weights:
+            mine = [f for f in fits if f["key"] == key and not f["masked"] and f["weight"] == w]
+            psnr = float(np.median([f["object_psnr"] for f in mine]))
+            outside = float(np.median([f["outside"] for f in mine]))
+            gap = None if bound is None else psnr - bound
+            rows.append({"mesh": key[0], "capture_seed": key[1], "arc_deg": key[2], "pose_noise_deg": key[3],
+                         "pose_noise_frac": key[4], "seen_ground_weight": w, "fits": len(mine),
+                         "fit_seeds": ";".join(str(f["fit_seed"]) for f in mine),
+                         "object_psnr": round(psnr, 2), "masked_psnr": None if bound is None else round(bound, 2),
+                         "gap_db": None if gap is None else round(gap, 2),
+                         "within_gap": None if gap is None else bool(gap >= GAP_DB),
+                         "outside": round(outside, 4), "within_outside": bool(outside <= OUTSIDE),
+                         "object_psnr_fits": ";".join(f"{f['object_psnr']:.2f}" for f in mine),
+                         "outside_fits": ";".join(f"{f['outside']:.4f}" for f in mine)})
+    return rows
+
+
+def _totals(rows: list[dict]) -> dict:
+    """Per weight: captures, and how many meet each target and both."""
+    out = {}
+    for w in sorted({r["seen_ground_weight"] for r in rows}):
+        mine = [r for r in rows if r["seen_ground_weight"] == w]
+        out[f"{w:g}"] = {"captures": len(mine), "within_gap": sum(bool(r["within_gap"]) for r in mine),
+                         "within_outside": sum(r["within_outside"] for r in mine),
+                         "both": sum(bool(r["within_gap"]) and r["within_outside"] for r in mine),
+                         "median_fits": float(np.median([r["fits"] for r in mine]))}
+    return out
+
+
+def _chart(path: Path, rows: list[dict]) -> None:
+    """Gap to the masked fit against the opacity outside, one point per capture and weight, each capture's
+    settings joined by a line; the targets as dashed lines."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    caps = dict.fromkeys((r["mesh"], r["capture_seed"], r["arc_deg"]) for r in rows if r["gap_db"] is not None)
+    for cap in caps:
+        mine = sorted((r for r in rows if (r["mesh"], r["capture_seed"], r["arc_deg"]) == cap and
+                       r["gap_db"] is not None), key=lambda r: r["seen_ground_weight"])
+        ax.plot([100 * r["outside"] for r in mine], [r["gap_db"] for r in mine], color="0.7", lw=1, zorder=1)
+        ax.annotate(f"{cap[0]} s{cap[1]} {cap[2]:g}°", (100 * mine[-1]["outside"], mine[-1]["gap_db"]), fontsize=7,
+                    xytext=(3, 3), textcoords="offset points")
+    for w, marker in zip(sorted({r["seen_ground_weight"] for r in rows}), "osD^v"):
+        mine = [r for r in rows if r["seen_ground_weight"] == w and r["gap_db"] is not None]
+        ax.scatter([100 * r["outside"] for r in mine], [r["gap_db"] for r in mine], marker=marker, zorder=2,
+                   label=f"--seen-ground-weight {w:g}")
+    ax.axhline(GAP_DB, ls="--", color="k", lw=0.8)
+    ax.axvline(100 * OUTSIDE, ls="--", color="k", lw=0.8)
+    ax.set_xlabel("opacity outside the true mask + 2 px (%), median over fit seeds")
+    ax.set_ylabel("object PSNR minus the masked fit's (dB), median")
+    ax.set_title("frontal and full walks without masks: the targets are up and left of the dashes", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def bench_capture_summary_command(args) -> int:
+    paths = [Path(p) for p in args.files]
+    for p in paths:
+        if not p.is_file():
+            raise UserError(f"{p}: no such results file")
+    rows = summary_rows(fit_rows(paths))
+    out = Path(args.out or "bench/results")
+    out.mkdir(parents=True, exist_ok=True)
+    report = {"meta": run_metadata(), "files": [p.name for p in paths], "gap_db": GAP_DB, "outside": OUTSIDE,
+              "totals": _totals(rows), "rows": rows}
+    (out / f"{args.name}.json").write_text(json.dumps(report, indent=1))
+    write_rows(out / f"{args.name}.csv", rows)
+    _chart(out / f"{args.name}.png", rows)
+    for r in rows:
+        gap = "" if r["gap_db"] is None else f", gap {r['gap_db']:+.2f}"
+        print(f"{r['mesh']} seed {r['capture_seed']} {r['arc_deg']:g}° weight {r['seen_ground_weight']:g}: "
+              f"{r['object_psnr']:.2f} dB{gap}, {100 * r['outside']:.2f}% outside ({r['fits']} "
+              f"fit{'s' if r['fits'] > 1 else ''})")
+    for w, t in report["totals"].items():
+        print(f"weight {w}: within the gap {t['within_gap']} of {t['captures']}, floaters {t['within_outside']}, "
+              f"both {t['both']}")
+    print(f"wrote {out / args.name}.json, .csv and .png")
+    return 0

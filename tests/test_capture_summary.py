@@ -1,0 +1,59 @@
+"""`bench capture-summary`: issue 40's targets by the medians over fit seeds, read from capture-background files."""
+import json
+
+import pytest
+from helpers import assert_one_line_error, run_cli
+
+
+def _file(path, seed, arc, rows):
+    path.write_text(json.dumps({"meta": {}, "capture": {"seed": seed, "arc_deg": arc}, "rows": rows}))
+    return path
+
+
+def _row(mode, fit_seed, psnr, outside, weight=None):
+    row = {"mesh": "spot", "mode": mode, "fit_seed": fit_seed, "object_psnr": psnr, "opacity_outside_2px": outside}
+    return row if weight is None else {**row, "seen_ground_weight": weight}
+
+
+@pytest.fixture
+def results(tmp_path):
+    a = _file(tmp_path / "a.json", 0, 120.0, [_row("masked", 0, 25.0, 0.0), _row("outer", 0, 24.0, 0.03),
+                                              _row("outer-seen-03", 0, 22.0, 0.01)])   # before the key was kept
+    b = _file(tmp_path / "b.json", 0, 120.0, [_row("outer", 0, 24.0, 0.03, 0.0),      # the same fit again
+                                              _row("outer-noseen", 10, 23.0, 0.01, 0.0),
+                                              _row("outer-noseen", 11, 25.0, 0.02, 0.0),
+                                              _row("outer", 10, 23.9, 0.005, 0.3), _row("outer", 11, 23.0, 0.02, 0.3)])
+    walk = _file(tmp_path / "walk.json", 0, 720.0, [_row("outer", 0, 26.0, 0.008, 0.0)])
+    return [a, b, walk]
+
+
+def test_the_medians_over_fit_seeds_meet_the_targets_or_not(results):
+    from snapshot3d.bench.capture_summary import _totals, fit_rows, summary_rows
+    fits = fit_rows(results)
+    assert len(fits) == 8   # the repeated fit counts once
+    rows = {(r["arc_deg"], r["seen_ground_weight"]): r for r in summary_rows(fits)}
+    plain, seen, walk = rows[(120.0, 0.0)], rows[(120.0, 0.3)], rows[(720.0, 0.0)]
+    assert plain["fits"] == 3 and plain["object_psnr"] == 24.0 and plain["outside"] == 0.02
+    assert plain["gap_db"] == -1.0 and plain["within_gap"] and plain["within_outside"]
+    assert seen["fits"] == 3 and seen["fit_seeds"] == "0;10;11" and seen["object_psnr"] == 23.0
+    assert seen["gap_db"] == -2.0 and not seen["within_gap"] and seen["outside"] == 0.01
+    assert walk["gap_db"] is None and walk["within_gap"] is None   # no masked fit of that capture
+    totals = _totals(list(rows.values()))
+    assert totals["0"] == {"captures": 2, "within_gap": 1, "within_outside": 2, "both": 1, "median_fits": 2.0}
+    assert totals["0.3"]["both"] == 0
+
+
+def test_the_command_writes_its_files_and_refuses_what_is_not_a_result(results, tmp_path):
+    out = tmp_path / "out"
+    proc = run_cli("bench", "capture-summary", *map(str, results), "--out", str(out), "--name", "s")
+    assert proc.returncode == 0, proc.stderr
+    assert "spot seed 0 120° weight 0: 24.00 dB, gap -1.00, 2.00% outside (3 fits)" in proc.stdout
+    assert {p.name for p in out.iterdir()} == {"s.json", "s.csv", "s.png"}
+    assert json.loads((out / "s.json").read_text())["totals"]["0.3"]["captures"] == 1
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    proc = run_cli("bench", "capture-summary", str(bad), "--out", str(tmp_path / "none"))
+    assert_one_line_error(proc, "bad.json: not a bench capture-background result")
+    proc = run_cli("bench", "capture-summary", str(tmp_path / "absent.json"), "--out", str(tmp_path / "none"))
+    assert_one_line_error(proc, "absent.json: no such results file")
+    assert not (tmp_path / "none").exists()
