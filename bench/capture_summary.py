@@ -20,15 +20,24 @@ GAP_DB = -1.5     # the object within 1.5 dB of the masked fit (issue 40)
 OUTSIDE = 0.02    # at most 2% of the opacity outside the true mask + 2 px
 
 
-def _weight(row: dict) -> float | None:
-    """The row's --seen-ground-weight as fitted: its own record, else its mode's setting, else 0 (rows written
-    before the option existed). None for a masked fit."""
+# the modes that differ from `outer` by --seen-ground-weight alone: one setting each, by the weight
+_WEIGHT_ONLY = ("outer", "outer-noseen", "outer-seen", "outer-seen-03", "outer-seen-1")
+
+
+def _setting(row: dict) -> tuple[str, float] | None:
+    """The row's fit as (variant, --seen-ground-weight): the variant is `outer` for the modes that differ from it by
+    the weight alone, else the mode's own name; the weight the row's own record, else its mode's setting, else 0
+    (rows written before the option existed). ("masked", nan) for the masked bound; None for a fit that is
+    neither (white, the refining modes' masked fits)."""
     from .capture_background import MODES
-    if MODES.get(row["mode"], ("", "white"))[1] != "outer":
+    mode = row["mode"]
+    if mode == "masked":
+        return ("masked", float("nan"))
+    if mode not in MODES or MODES[mode][1] != "outer":
         return None
-    if row.get("seen_ground_weight") is not None:
-        return float(row["seen_ground_weight"])
-    return float(MODES[row["mode"]][3].get("seen_ground_weight", 0.0))
+    weight = row.get("seen_ground_weight")
+    weight = float(MODES[mode][3].get("seen_ground_weight", 0.0)) if weight is None else float(weight)
+    return ("outer" if mode in _WEIGHT_ONLY else mode, weight)
 
 
 def fit_rows(paths: list[Path]) -> list[dict]:
@@ -42,34 +51,36 @@ def fit_rows(paths: list[Path]) -> list[dict]:
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise UserError(f"{path}: not a bench capture-background result ({type(exc).__name__}: {exc})") from None
         for row in rows:
+            setting = _setting(row)
+            if setting is None:
+                continue
             key = (row["mesh"], capture["seed"], float(capture.get("arc_deg", 720.0)),
                    float(capture.get("pose_noise_deg", 0.0)), float(capture.get("pose_noise_frac", 0.0)))
-            weight = _weight(row)
             fit_seed = row.get("fit_seed", capture["seed"])
-            if (key, weight, row["mode"] == "masked", fit_seed) in seen:
+            if (key, setting[0], str(setting[1]), fit_seed) in seen:
                 continue
-            seen.add((key, weight, row["mode"] == "masked", fit_seed))
-            fits.append({"key": key, "weight": weight, "masked": row["mode"] == "masked", "fit_seed": fit_seed,
-                         "object_psnr": row["object_psnr"], "outside": row["opacity_outside_2px"],
-                         "file": Path(path).name})
+            seen.add((key, setting[0], str(setting[1]), fit_seed))
+            fits.append({"key": key, "variant": setting[0], "weight": setting[1], "fit_seed": fit_seed,
+                         "object_psnr": row["object_psnr"], "outside": row["opacity_outside_2px"]})
     return fits
 
 
 def summary_rows(fits: list[dict]) -> list[dict]:
-    """One row per capture and weight: the fits' seeds, the medians, the masked bound and the two targets.
-    Captures without a masked fit get no gap."""
+    """One row per capture, variant and weight: the fits' seeds, the medians, the masked bound and the two
+    targets. Captures without a masked fit get no gap."""
     rows = []
     for key in dict.fromkeys(f["key"] for f in fits):
-        masked = [f["object_psnr"] for f in fits if f["key"] == key and f["masked"]]
+        masked = [f["object_psnr"] for f in fits if f["key"] == key and f["variant"] == "masked"]
         bound = float(np.median(masked)) if masked else None
-        weights = sorted({f["weight"] for f in fits if f["key"] == key and not f["masked"]})
-        for w in weights:
-            mine = [f for f in fits if f["key"] == key and not f["masked"] and f["weight"] == w]
+        settings = dict.fromkeys((f["variant"], f["weight"]) for f in fits if f["key"] == key and
+                                 f["variant"] != "masked")
+        for variant, w in sorted(settings):
+            mine = [f for f in fits if f["key"] == key and (f["variant"], f["weight"]) == (variant, w)]
             psnr = float(np.median([f["object_psnr"] for f in mine]))
             outside = float(np.median([f["outside"] for f in mine]))
             gap = None if bound is None else psnr - bound
             rows.append({"mesh": key[0], "capture_seed": key[1], "arc_deg": key[2], "pose_noise_deg": key[3],
-                         "pose_noise_frac": key[4], "seen_ground_weight": w, "fits": len(mine),
+                         "pose_noise_frac": key[4], "variant": variant, "seen_ground_weight": w, "fits": len(mine),
                          "fit_seeds": ";".join(str(f["fit_seed"]) for f in mine),
                          "object_psnr": round(psnr, 2), "masked_psnr": None if bound is None else round(bound, 2),
                          "gap_db": None if gap is None else round(gap, 2),
@@ -80,15 +91,21 @@ def summary_rows(fits: list[dict]) -> list[dict]:
     return rows
 
 
+def _label(variant: str, weight: float) -> str:
+    """The weight, and the variant where it is not plain `outer`: "0.3", "0.3 (outer-ground256)"."""
+    return f"{weight:g}" if variant == "outer" else f"{weight:g} ({variant})"
+
+
 def _totals(rows: list[dict]) -> dict:
-    """Per weight: captures, and how many meet each target and both."""
+    """Per setting (the weight, with the variant's name where it is not plain `outer`): captures, and how many
+    meet each target and both."""
     out = {}
-    for w in sorted({r["seen_ground_weight"] for r in rows}):
-        mine = [r for r in rows if r["seen_ground_weight"] == w]
-        out[f"{w:g}"] = {"captures": len(mine), "within_gap": sum(bool(r["within_gap"]) for r in mine),
-                         "within_outside": sum(r["within_outside"] for r in mine),
-                         "both": sum(bool(r["within_gap"]) and r["within_outside"] for r in mine),
-                         "median_fits": float(np.median([r["fits"] for r in mine]))}
+    for variant, w in sorted({(r["variant"], r["seen_ground_weight"]) for r in rows}):
+        mine = [r for r in rows if (r["variant"], r["seen_ground_weight"]) == (variant, w)]
+        out[_label(variant, w)] = {"captures": len(mine), "within_gap": sum(bool(r["within_gap"]) for r in mine),
+                                   "within_outside": sum(r["within_outside"] for r in mine),
+                                   "both": sum(bool(r["within_gap"]) and r["within_outside"] for r in mine),
+                                   "median_fits": float(np.median([r["fits"] for r in mine]))}
     return out
 
 
@@ -100,14 +117,14 @@ def _chart(path: Path, rows: list[dict]) -> None:
     caps = dict.fromkeys((r["mesh"], r["capture_seed"], r["arc_deg"]) for r in rows if r["gap_db"] is not None)
     for cap in caps:
         mine = sorted((r for r in rows if (r["mesh"], r["capture_seed"], r["arc_deg"]) == cap and
-                       r["gap_db"] is not None), key=lambda r: r["seen_ground_weight"])
+                       r["gap_db"] is not None), key=lambda r: (r["variant"], r["seen_ground_weight"]))
         ax.plot([100 * r["outside"] for r in mine], [r["gap_db"] for r in mine], color="0.7", lw=1, zorder=1)
         ax.annotate(f"{cap[0]} s{cap[1]} {cap[2]:g}°", (100 * mine[-1]["outside"], mine[-1]["gap_db"]), fontsize=7,
                     xytext=(3, 3), textcoords="offset points")
-    for w, marker in zip(sorted({r["seen_ground_weight"] for r in rows}), "osD^v"):
-        mine = [r for r in rows if r["seen_ground_weight"] == w and r["gap_db"] is not None]
+    for (variant, w), marker in zip(sorted({(r["variant"], r["seen_ground_weight"]) for r in rows}), "osD^v<>ph"):
+        mine = [r for r in rows if (r["variant"], r["seen_ground_weight"]) == (variant, w) and r["gap_db"] is not None]
         ax.scatter([100 * r["outside"] for r in mine], [r["gap_db"] for r in mine], marker=marker, zorder=2,
-                   label=f"--seen-ground-weight {w:g}")
+                   label=f"--seen-ground-weight {_label(variant, w)}")
     ax.axhline(GAP_DB, ls="--", color="k", lw=0.8)
     ax.axvline(100 * OUTSIDE, ls="--", color="k", lw=0.8)
     ax.set_xlabel("opacity outside the true mask + 2 px (%), median over fit seeds")
@@ -134,7 +151,8 @@ def bench_capture_summary_command(args) -> int:
     _chart(out / f"{args.name}.png", rows)
     for r in rows:
         gap = "" if r["gap_db"] is None else f", gap {r['gap_db']:+.2f}"
-        print(f"{r['mesh']} seed {r['capture_seed']} {r['arc_deg']:g}° weight {r['seen_ground_weight']:g}: "
+        print(f"{r['mesh']} seed {r['capture_seed']} {r['arc_deg']:g}° weight "
+              f"{_label(r['variant'], r['seen_ground_weight'])}: "
               f"{r['object_psnr']:.2f} dB{gap}, {100 * r['outside']:.2f}% outside ({r['fits']} "
               f"fit{'s' if r['fits'] > 1 else ''})")
     for w, t in report["totals"].items():

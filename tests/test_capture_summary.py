@@ -23,21 +23,25 @@ def results(tmp_path):
                                               _row("outer-noseen", 10, 23.0, 0.01, 0.0),
                                               _row("outer-noseen", 11, 25.0, 0.02, 0.0),
                                               _row("outer", 10, 23.9, 0.005, 0.3), _row("outer", 11, 23.0, 0.02, 0.3)])
-    walk = _file(tmp_path / "walk.json", 0, 720.0, [_row("outer", 0, 26.0, 0.008, 0.0)])
+    walk = _file(tmp_path / "walk.json", 0, 720.0, [_row("outer", 0, 26.0, 0.008, 0.0), _row("white", 0, 9.0, 0.5),
+                                                   _row("outer-ground256", 0, 27.0, 0.001, 0.0)])
     return [a, b, walk]
 
 
 def test_the_medians_over_fit_seeds_meet_the_targets_or_not(results):
     from snapshot3d.bench.capture_summary import _totals, fit_rows, summary_rows
     fits = fit_rows(results)
-    assert len(fits) == 8   # the repeated fit counts once
-    rows = {(r["arc_deg"], r["seen_ground_weight"]): r for r in summary_rows(fits)}
+    assert len(fits) == 9   # the repeated fit counts once, the white one not at all
+    rows = {(r["arc_deg"], r["seen_ground_weight"]): r for r in summary_rows(fits) if r["variant"] == "outer"}
     plain, seen, walk = rows[(120.0, 0.0)], rows[(120.0, 0.3)], rows[(720.0, 0.0)]
     assert plain["fits"] == 3 and plain["object_psnr"] == 24.0 and plain["outside"] == 0.02
     assert plain["gap_db"] == -1.0 and plain["within_gap"] and plain["within_outside"]
     assert seen["fits"] == 3 and seen["fit_seeds"] == "0;10;11" and seen["object_psnr"] == 23.0
     assert seen["gap_db"] == -2.0 and not seen["within_gap"] and seen["outside"] == 0.01
     assert walk["gap_db"] is None and walk["within_gap"] is None   # no masked fit of that capture
+    assert walk["fits"] == 1 and walk["object_psnr"] == 26.0   # the white fit left out, another variant apart
+    other = [r for r in summary_rows(fits) if r["variant"] == "outer-ground256"]
+    assert len(other) == 1 and other[0]["object_psnr"] == 27.0
     totals = _totals(list(rows.values()))
     assert totals["0"] == {"captures": 2, "within_gap": 1, "within_outside": 2, "both": 1, "median_fits": 2.0}
     assert totals["0.3"]["both"] == 0
@@ -48,6 +52,7 @@ def test_the_command_writes_its_files_and_refuses_what_is_not_a_result(results, 
     proc = run_cli("bench", "capture-summary", *map(str, results), "--out", str(out), "--name", "s")
     assert proc.returncode == 0, proc.stderr
     assert "spot seed 0 120° weight 0: 24.00 dB, gap -1.00, 2.00% outside (3 fits)" in proc.stdout
+    assert "spot seed 0 720° weight 0 (outer-ground256): 27.00 dB, 0.10% outside (1 fit)" in proc.stdout
     assert {p.name for p in out.iterdir()} == {"s.json", "s.csv", "s.png"}
     assert json.loads((out / "s.json").read_text())["totals"]["0.3"]["captures"] == 1
     bad = tmp_path / "bad.json"
