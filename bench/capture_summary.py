@@ -12,6 +12,7 @@ import numpy as np
 
 from snapshot3d.errors import UserError
 
+from .capture_background import MODES
 from .common import pyplot, run_metadata, write_rows
 
 __all__ = ["GAP_DB", "OUTSIDE", "fit_rows", "summary_rows", "bench_capture_summary_command"]
@@ -29,7 +30,6 @@ def _setting(row: dict) -> tuple[str, float] | None:
     the weight alone, else the mode's own name; the weight the row's own record, else its mode's setting, else 0
     (rows written before the option existed). ("masked", nan) for the masked bound; None for a fit that is
     neither (white, the refining modes' masked fits)."""
-    from .capture_background import MODES
     mode = row["mode"]
     if mode == "masked":
         return ("masked", float("nan"))

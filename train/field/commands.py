@@ -23,8 +23,8 @@ from snapshot3d.validate import MESH_RES, SCENE_MAX_RES, VIEW_SIZE, check_views,
 from .config import FitConfig, check_fit_config
 from .curves import payload_hint
 
-__all__ = ["Fitted", "fit_scene", "resolve_autos", "fit_command", "render_command", "mesh_command", "train_decoder_command",
-           "orbit_cameras", "render_scene"]
+__all__ = ["Fitted", "fit_scene", "resolve_autos", "fit_command", "render_command", "mesh_command",
+           "train_decoder_command", "orbit_cameras", "render_scene"]
 
 
 # --refine-poses auto on poses adjusted to the photos' matches: the corrections start at half the steps at the
@@ -149,7 +149,7 @@ def fit_scene(spec: str, cfg: FitConfig, budget: str = "fixed", downscale: int =
         ev = evaluate_planes(dequantize_planes(codes), with_head(decoder, head), posed, background=res.state.background,
                              samples=cfg.background_samples)
         throughput = {"rays_per_s": res.state.rays / max(res.seconds, 1e-9),
-                                 "samples_per_s": res.state.samples / max(res.seconds, 1e-9)}
+                      "samples_per_s": res.state.samples / max(res.seconds, 1e-9)}
         train_c2w = posed.c2w[posed.train]   # (V, 4, 4): the poses the fit ended with, for the benches
         if res.state.poses is not None:
             from .object_carve import refined_c2w
