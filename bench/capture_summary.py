@@ -27,8 +27,9 @@ _WEIGHT_ONLY = ("outer", "outer-noseen", "outer-seen", "outer-seen-03", "outer-s
 
 def _setting(row: dict) -> tuple[str, float] | None:
     """The row's fit as (variant, --seen-ground-weight): the variant is `outer` for the modes that differ from it by
-    the weight alone, else the mode's own name; the weight the row's own record, else its mode's setting, else 0
-    (rows written before the option existed). ("masked", nan) for the masked bound; None for a fit that is
+    the weight alone (`outer-spare` where the row says the penalty spared the object's cells, `fit
+    --seen-ground-spare`), else the mode's own name; the weight the row's own record, else its mode's setting, else
+    0 (rows written before the option existed). ("masked", nan) for the masked bound; None for a fit that is
     neither (white, the refining modes' masked fits)."""
     mode = row["mode"]
     if mode == "masked":
@@ -37,7 +38,9 @@ def _setting(row: dict) -> tuple[str, float] | None:
         return None
     weight = row.get("seen_ground_weight")
     weight = float(MODES[mode][3].get("seen_ground_weight", 0.0)) if weight is None else float(weight)
-    return ("outer" if mode in _WEIGHT_ONLY else mode, weight)
+    if mode not in _WEIGHT_ONLY:
+        return (mode, weight)
+    return ("outer-spare" if row.get("seen_ground_spare") else "outer", weight)
 
 
 def fit_rows(paths: list[Path]) -> list[dict]:

@@ -15,8 +15,9 @@ def _file(path, seed, arc, rows):
     return path
 
 
-def _row(mode, fit_seed, psnr, outside, weight=None):
-    row = {"mesh": "spot", "mode": mode, "fit_seed": fit_seed, "object_psnr": psnr, "opacity_outside_2px": outside}
+def _row(mode, fit_seed, psnr, outside, weight=None, **more):
+    row = {"mesh": "spot", "mode": mode, "fit_seed": fit_seed, "object_psnr": psnr, "opacity_outside_2px": outside,
+           **more}
     return row if weight is None else {**row, "seen_ground_weight": weight}
 
 
@@ -27,7 +28,9 @@ def results(tmp_path):
     b = _file(tmp_path / "b.json", 0, 120.0, [_row("outer", 0, 24.0, 0.03, 0.0),      # the same fit again
                                               _row("outer-noseen", 10, 23.0, 0.01, 0.0),
                                               _row("outer-noseen", 11, 25.0, 0.02, 0.0),
-                                              _row("outer", 10, 23.9, 0.005, 0.3), _row("outer", 11, 23.0, 0.02, 0.3)])
+                                              _row("outer", 10, 23.9, 0.005, 0.3), _row("outer", 11, 23.0, 0.02, 0.3),
+                                              # the same fit seeds with the object's cells spared: apart
+                                              _row("outer", 10, 24.6, 0.01, 0.3, seen_ground_spare=True)])
     walk = _file(tmp_path / "walk.json", 0, 720.0, [_row("outer", 0, 26.0, 0.008, 0.0), _row("white", 0, 9.0, 0.5),
                                                    _row("outer-ground256", 0, 27.0, 0.001, 0.0)])
     return [a, b, walk]
@@ -36,7 +39,7 @@ def results(tmp_path):
 def test_the_medians_over_fit_seeds_meet_the_targets_or_not(results):
     from snapshot3d.bench.capture_summary import _totals, fit_rows, summary_rows
     fits = fit_rows(results)
-    assert len(fits) == 9   # the repeated fit counts once, the white one not at all
+    assert len(fits) == 10   # the repeated fit counts once, the white one not at all
     rows = {(r["arc_deg"], r["seen_ground_weight"]): r for r in summary_rows(fits) if r["variant"] == "outer"}
     plain, seen, walk = rows[(120.0, 0.0)], rows[(120.0, 0.3)], rows[(720.0, 0.0)]
     assert plain["fits"] == 3 and plain["object_psnr"] == _near(24.0) and plain["outside"] == _near(0.02)
@@ -47,6 +50,8 @@ def test_the_medians_over_fit_seeds_meet_the_targets_or_not(results):
     assert walk["fits"] == 1 and walk["object_psnr"] == _near(26.0)   # the white fit left out, another variant apart
     other = [r for r in summary_rows(fits) if r["variant"] == "outer-ground256"]
     assert len(other) == 1 and other[0]["object_psnr"] == _near(27.0)
+    spare = [r for r in summary_rows(fits) if r["variant"] == "outer-spare"]
+    assert len(spare) == 1 and spare[0]["fits"] == 1 and spare[0]["gap_db"] == _near(-0.4)
     totals = _totals(list(rows.values()))
     assert totals["0"] == {"captures": 2, "within_gap": 1, "within_outside": 2, "both": 1, "median_fits": 2.0}
     assert totals["0.3"]["both"] == 0

@@ -53,7 +53,7 @@ def small():
     return load_scene("builtin:spot", size=24)
 
 
-def _fit(posed, weight: float, pixels):
+def _fit(posed, weight: float, pixels, cells: dict | None = None, spare: bool = True):
     from dataclasses import replace
 
     from snapshot3d.train.field.config import FitConfig
@@ -61,10 +61,17 @@ def _fit(posed, weight: float, pixels):
     from snapshot3d.train.field.fit import fit
     below = float(posed.box[0, 2]) - 1.0   # a ground plane under the whole box: every sample counts
     posed = replace(posed, info={**posed.info, "ground_pixels": pixels, "ground_plane": [0.0, 0.0, below],
-                                 "ground_clear": 0.1})
+                                 "ground_clear": 0.1, **(cells or {})})
     cfg = FitConfig(steps=30, batch_rays=512, plane_res=16, plane_channels=4, background="outer", background_res=8,
-                    background_samples=4, occupancy=False, object_steps=0.0, seen_ground_weight=weight)
+                    background_samples=4, occupancy=False, object_steps=0.0, seen_ground_weight=weight,
+                    seen_ground_spare=spare)
     return fit(posed, load_decoder(), cfg).state
+
+
+@pytest.fixture(scope="module")
+def plain(small):
+    """The fit without the weight and without ground pixels."""
+    return _fit(small, 0.0, None)
 
 
 def _opacity(st, posed, pixels) -> float:
@@ -77,14 +84,14 @@ def _opacity(st, posed, pixels) -> float:
                                  st.bank.dirs[k])[1].mean())
 
 
-def test_the_weight_clears_the_planes_along_the_ground_rays_and_zero_changes_nothing(small):
+def test_the_weight_clears_the_planes_along_the_ground_rays_and_zero_changes_nothing(small, plain):
     """Rays said to show the ground (here: the object's own pixels of the first training view, the hardest case)
     end far more transparent with the weight than without; weight 0 gives the fit without the pixels, bit for
     bit."""
     alpha = small.alpha[small.train[0]]
     rows, cols = np.nonzero(alpha > 0.9)
     pixels = np.c_[np.zeros(len(rows), np.int64), rows, cols]
-    plain, zero, weighted = _fit(small, 0.0, None), _fit(small, 0.0, pixels), _fit(small, 1.0, pixels)
+    zero, weighted = _fit(small, 0.0, pixels), _fit(small, 1.0, pixels)
     assert torch.equal(plain.planes.planes, zero.planes.planes)
     before, after = _opacity(plain, small, pixels), _opacity(weighted, small, pixels)
     assert before > 0.5 and after < 0.5 * before, (before, after)
@@ -115,6 +122,50 @@ def test_the_opacity_counts_only_the_samples_higher_than_clear_over_the_ground()
     tau_half, tau_full = -torch.log1p(-half), -torch.log1p(-full)
     torch.testing.assert_close(tau_half, 0.5 * tau_full, rtol=0.1, atol=0.0)
     assert torch.equal(at((0.0, 0.0, 4.0), 0.5), torch.zeros(2))
+
+
+def test_the_samples_in_the_spared_cells_count_for_nothing():
+    """The object's cells (`seen_ground.Spared`) over the box of even density: sparing none changes nothing, the
+    upper half leaves a ray straight down half its optical depth, all of them none; points off the box are never
+    held."""
+    from snapshot3d.train.field.decoder import load_decoder
+    from snapshot3d.train.field.sampler import BoxFrame
+    from snapshot3d.train.field.seen_ground import Spared, clear_opacity
+    box = np.array([[-1.0, -1.0, 2.0], [1.0, 1.0, 4.0]], np.float32)
+    frame = BoxFrame.from_box(box)
+    planes = torch.tensor([0.075, -0.015, -0.11, 0.03]).view(1, 4, 1, 1).expand(3, 4, 8, 8).clone()
+    dec = load_decoder()
+    o = torch.tensor([[0.1, -0.2, 3.0], [0.3, 0.2, 3.0]])
+    d = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+
+    def at(cells):
+        spared = None if cells is None else Spared(torch.from_numpy(cells), torch.from_numpy(box))
+        return clear_opacity(planes, dec, frame, None, o, d, (0.0, 0.0, 0.0), 1.0, torch.Generator().manual_seed(5),
+                             spared)
+
+    full, none = at(None), np.zeros((4, 4, 4), bool)
+    torch.testing.assert_close(at(none), full)
+    upper = none.copy()
+    upper[:, :, 2:] = True
+    tau_half, tau_full = -torch.log1p(-at(upper)), -torch.log1p(-full)
+    torch.testing.assert_close(tau_half, 0.5 * tau_full, rtol=0.1, atol=0.0)
+    assert torch.equal(at(~none), torch.zeros(2))
+    held = Spared(torch.from_numpy(~none), torch.from_numpy(box)).holds(
+        torch.tensor([[0.0, 0.0, 3.0], [0.0, 0.0, 4.5], [1.2, 0.0, 3.0], [-0.99, 0.99, 2.01]]))
+    assert held.tolist() == [True, False, False, True]
+
+
+def test_the_fit_spares_the_object_cells_it_is_given(small, plain):
+    """The object's own pixels said to show the ground: with every cell of the box spared the weight clears nothing
+    (the object keeps its opacity), without them it clears it; --no-seen-ground-spare ignores the cells."""
+    alpha = small.alpha[small.train[0]]
+    rows, cols = np.nonzero(alpha > 0.9)
+    pixels = np.c_[np.zeros(len(rows), np.int64), rows, cols]
+    every = {"object_cells": np.ones((8, 8, 8), bool), "object_cells_box": np.asarray(small.box, np.float32)}
+    before = _opacity(plain, small, pixels)
+    spared = _opacity(_fit(small, 1.0, pixels, every), small, pixels)
+    ignored = _opacity(_fit(small, 1.0, pixels, every, spare=False), small, pixels)
+    assert spared > 0.8 * before and ignored < 0.5 * before, (before, spared, ignored)
 
 
 def test_the_cameras_azimuth_span_is_360_less_the_widest_gap():

@@ -166,3 +166,24 @@ def test_the_fit_starts_from_the_adjusted_poses_and_refines_them_from_half_way_u
     _, _, refined = _tightened(replace(posed, info={**posed.info, "capture": dict(posed.info["capture"])}), None, cfg,
                                None, quiet=True, late_start=False)
     assert (refined.refine_poses, refined.pose_start) == ("on", 0.1)
+
+
+def test_the_object_box_step_hands_the_fit_the_objects_cells_over_the_box_they_were_found_in(capture):
+    """After the object-box fit, the posed images carry its object cells (GRID^3, bool) and the box they lie over,
+    which holds the box cut round them; the ground rays spare them (`seen_ground.Spared`). The report stays
+    free of arrays."""
+    from snapshot3d.capture import CaptureOptions, with_overlap_box
+    from snapshot3d.loaders import load_scene
+    from snapshot3d.train.field.box_tighten import GRID
+    from snapshot3d.train.field.commands import _tightened
+    from snapshot3d.train.field.config import FitConfig
+    from snapshot3d.train.field.decoder import load_decoder
+
+    posed = with_overlap_box(load_scene(str(capture / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0))))
+    cfg = FitConfig(background="outer", steps=20, batch_rays=512, plane_res=16, plane_channels=4, occ_warmup=4)
+    out, info, _ = _tightened(posed, load_decoder(), cfg, None, quiet=True)
+    cells, over = out.info["object_cells"], out.info["object_cells_box"]
+    assert cells.shape == (GRID, GRID, GRID) and cells.dtype == bool and cells.any() and not cells.all()
+    assert np.all(over[0] <= out.box[0] + 1e-6) and np.all(over[1] >= out.box[1] - 1e-6)
+    assert info["object_box_steps"] == 10
+    json.dumps(info)   # the report: no arrays

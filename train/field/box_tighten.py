@@ -151,12 +151,14 @@ def cells_box(cells: np.ndarray, box: np.ndarray, margin: int = OBJECT_MARGIN) -
     return out.astype(np.float32)
 
 
-def object_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tuple[np.ndarray, dict]:
+def object_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tuple[np.ndarray, dict, np.ndarray]:
     """The box of `posed` (already cut at the ground) cut round the object: a fit of cfg.object_box of the steps
     with the background model, the object's cells of its planes (`object_carve.object_cells`, as the object-alone
-    step finds them), and `cells_box` round them -> (box (2, 3) float32 world, info for the report). After the
-    pre-fit the density is too diffuse for a tight cut (docs/capture.md); after this longer fit the object's cells
-    lie within a few cells of the object, and 16x4 planes spread over a box 1.5 times too wide lose 1-2 dB."""
+    step finds them), and `cells_box` round them -> (box (2, 3) float32 world, info for the report, the object's
+    cells (GRID, GRID, GRID) bool [ix, iy, iz] over posed.box, which the rays that show the ground spare:
+    `seen_ground.clear_opacity`). After the pre-fit the density is too diffuse for a tight cut (docs/capture.md);
+    after this longer fit the object's cells lie within a few cells of the object, and 16x4 planes spread over a
+    box 1.5 times too wide lose 1-2 dB."""
     from .fit import fit
     from .object_carve import object_cells
     t0 = time.perf_counter()
@@ -165,5 +167,6 @@ def object_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tupl
                   channel_fraction=0.0, object_steps=0.0, seen_ground_weight=0.0)
     res = fit(posed, decoder, pre, device=device)
     alpha, rgb = cell_alpha(res.state.planes.planes.detach(), decoder, posed.box, GRID, with_rgb=True)
-    box = cells_box(object_cells(alpha, rgb), posed.box)
-    return box, {"object_box_steps": pre.steps, "object_box_seconds": round(time.perf_counter() - t0, 1)}
+    cells = object_cells(alpha, rgb)
+    box = cells_box(cells, posed.box)
+    return box, {"object_box_steps": pre.steps, "object_box_seconds": round(time.perf_counter() - t0, 1)}, cells

@@ -214,8 +214,12 @@ def _tightened(posed, decoder, cfg, device, quiet: bool, late_start: bool = Fals
                    "ground_pixels": info.pop("ground_pixels", None), "ground_plane": info.get("ground_plane"),
                    "ground_clear": info.get("ground_clear")}
     if info["ground_z"] is not None and cfg.object_box > 0 and cfg.object_steps > 0:   # round the object's cells
-        box, more = object_box(replace(posed, box=box, info=info_ground), decoder, cfg, device)
+        cells_over = box
+        box, more, cells = object_box(replace(posed, box=box, info=info_ground), decoder, cfg, device)
         info.update(more)
+        # the object's cells (G, G, G) over the box they were found in, not reported: the ground rays spare them
+        info_ground.update(object_cells=cells, object_cells_box=np.asarray(cells_over, np.float32))
+        info["seen_ground_spare"] = bool(cfg.seen_ground_spare and cfg.seen_ground_weight > 0 and cells.any())
         ground += f", then cut round the object's cells of a {more['object_box_steps']}-step fit"
     source = (f"{info['sparse_points']} sparse points of the photos ({info['object_points']} on the object)"
               if info["box_from"] == "sparse points" else f"{info['prefit_steps']} steps' density")

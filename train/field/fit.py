@@ -116,7 +116,7 @@ def _ground_rays(posed: PosedImages, cfg: FitConfig, outer: bool):
     if not outer or cfg.seen_ground_weight <= 0:
         return None
     from .seen_ground import ground_rays
-    return ground_rays(posed.info, posed.height, posed.width)
+    return ground_rays(posed.info, posed.height, posed.width, cfg.seen_ground_spare)
 
 
 def new_state_channel(cfg: FitConfig, device=None) -> tuple | None:
@@ -239,7 +239,8 @@ def _seen_ground_opacity(st: FitState, planes: torch.Tensor, decoder, occ, n: in
     o, d = st.bank.origins[k], st.bank.dirs[k]
     if st.poses is not None:
         o, d = st.poses(st.bank.view[k], o, d)
-    return clear_opacity(planes, decoder, st.frame, occ, o, d, st.ground.plane, st.ground.clear, gen).mean()
+    return clear_opacity(planes, decoder, st.frame, occ, o, d, st.ground.plane, st.ground.clear, gen,
+                         st.ground.spared).mean()
 
 
 def _save_ckpt(path: Path, st: FitState, cfg: FitConfig, gen: torch.Generator, scene: str):
