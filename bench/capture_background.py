@@ -59,8 +59,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-seen": ("transforms.json", "outer", "auto", {"seen_ground_weight": 0.1}),
          "outer-seen-03": ("transforms.json", "outer", "auto", {"seen_ground_weight": 0.3}),
          "outer-seen-1": ("transforms.json", "outer", "auto", {"seen_ground_weight": 1.0}),
-         # the same rays counting the samples in the object's cells too (--no-seen-ground-spare, as before 12-07)
-         "outer-seen-all": ("transforms.json", "outer", "auto", {"seen_ground_spare": False}),
+         # the same rays sparing the samples in the object's cells (--seen-ground-spare; its rows say so)
+         "outer-spare": ("transforms.json", "outer", "auto", {"seen_ground_spare": True}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),

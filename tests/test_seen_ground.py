@@ -53,7 +53,7 @@ def small():
     return load_scene("builtin:spot", size=24)
 
 
-def _fit(posed, weight: float, pixels, cells: dict | None = None, spare: bool = True):
+def _fit(posed, weight: float, pixels, cells: dict | None = None, spare: bool = False):
     from dataclasses import replace
 
     from snapshot3d.train.field.config import FitConfig
@@ -156,15 +156,15 @@ def test_the_samples_in_the_spared_cells_count_for_nothing():
 
 
 def test_the_fit_spares_the_object_cells_it_is_given(small, plain):
-    """The object's own pixels said to show the ground: with every cell of the box spared the weight clears nothing
-    (the object keeps its opacity), without them it clears it; --no-seen-ground-spare ignores the cells."""
+    """The object's own pixels said to show the ground: with every cell of the box spared (--seen-ground-spare) the
+    weight clears nothing (the object keeps its opacity); without the option, the default, it ignores the cells."""
     alpha = small.alpha[small.train[0]]
     rows, cols = np.nonzero(alpha > 0.9)
     pixels = np.c_[np.zeros(len(rows), np.int64), rows, cols]
     every = {"object_cells": np.ones((8, 8, 8), bool), "object_cells_box": np.asarray(small.box, np.float32)}
     before = _opacity(plain, small, pixels)
-    spared = _opacity(_fit(small, 1.0, pixels, every), small, pixels)
-    ignored = _opacity(_fit(small, 1.0, pixels, every, spare=False), small, pixels)
+    spared = _opacity(_fit(small, 1.0, pixels, every, spare=True), small, pixels)
+    ignored = _opacity(_fit(small, 1.0, pixels, every), small, pixels)
     assert spared > 0.8 * before and ignored < 0.5 * before, (before, spared, ignored)
 
 

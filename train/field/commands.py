@@ -217,7 +217,7 @@ def _tightened(posed, decoder, cfg, device, quiet: bool, late_start: bool = Fals
         cells_over = box
         box, more, cells = object_box(replace(posed, box=box, info=info_ground), decoder, cfg, device)
         info.update(more)
-        # the object's cells (G, G, G) over the box they were found in, not reported: the ground rays spare them
+        # the object's cells (G, G, G) over the box they were found in, not reported: what --seen-ground-spare spares
         info_ground.update(object_cells=cells, object_cells_box=np.asarray(cells_over, np.float32))
         info["seen_ground_spare"] = bool(cfg.seen_ground_spare and cfg.seen_ground_weight > 0 and cells.any())
         ground += f", then cut round the object's cells of a {more['object_box_steps']}-step fit"

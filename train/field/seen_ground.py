@@ -2,9 +2,10 @@
 lies on the ground (`snapshot3d.sparse_box.ground_pixels`), its pixel's ray crosses the box through empty space
 down to it. The planes' opacity along that ray is penalised above `clear` over the ground plane; below it, the
 feature may lie on the object's own base (a hoof within the ground's band), where the ray ends inside the box.
-A ray whose pixel lies next to the object's outline passes within a texel of its edge; the samples in the object's
-cells as the object-box fit found them (`box_tighten.object_box`) are spared, else the penalty wears the edge away
-(spot's frontal arc: the held-out views' pixels along the outline lost 1.8 dB, docs/capture.md).
+A ray whose pixel lies next to the object's outline passes within a texel of its edge, and the penalty wears the
+edge away (spot's frontal arc: the held-out views' pixels along the outline lost 1.8 dB, docs/capture.md). With
+`fit --seen-ground-spare` the samples in the object's cells as the object-box fit found them
+(`box_tighten.object_box`) are spared: the object gains, the floaters that those cells hold stay.
 
 Spaces: the rays are the fit's (q space, `sampler.BoxFrame`); the ground plane z = a x + b y + c is in world units.
 """
@@ -50,7 +51,7 @@ class GroundRays:
     spared: Spared | None = None
 
 
-def ground_rays(info: dict, height: int, width: int, spare: bool = True) -> GroundRays | None:
+def ground_rays(info: dict, height: int, width: int, spare: bool = False) -> GroundRays | None:
     """posed.info's "ground_pixels" (K, 3) (train frame, row, col), "ground_plane" and "ground_clear" (the sparse
     box's) -> their rays as indices into the fit's ray bank (`rays.make_rays` of the training views, row-major), or
     None when there are none; with `spare`, and "object_cells" over "object_cells_box" in info (`object_box`'s),
