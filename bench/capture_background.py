@@ -110,7 +110,9 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = No
                        capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
     true_box = json.loads((cap / "gt/truth.json").read_text())["box"]
     decoder = load_decoder(cfg.decoder)
-    score = score_object(torch.from_numpy(scene.planes()), decoder, scene.box, truth, true_box)
+    white = cap / "gt/transforms_white.json"   # the object alone over white (captures since 2026-12-07)
+    clean = load_scene(str(white), capture=CaptureOptions(up=(0.0, 0.0, 1.0))) if white.is_file() else None
+    score = score_object(torch.from_numpy(scene.planes()), decoder, scene.box, truth, true_box, clean=clean)
     written = load_scene(str(cap / name), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
     at = {"written": written.c2w[written.train], "fit": fitted.train_c2w}
     true_c2w, intrinsics = truth.c2w[truth.train], truth.intrinsics[truth.train]

@@ -21,6 +21,9 @@ GAP_DB = -1.5     # the object within 1.5 dB of the masked fit (issue 40)
 OUTSIDE = 0.02    # at most 2% of the opacity outside the true mask + 2 px
 
 
+# the object's pixels split along its outline (score_object's object_ring_psnr, object_inner_psnr), where the rows
+# carry them (since 2026-12-07)
+_PARTS = ("ring", "inner")
 # the modes that differ from `outer` by --seen-ground-weight alone: one setting each, by the weight
 _WEIGHT_ONLY = ("outer", "outer-noseen", "outer-seen", "outer-seen-03", "outer-seen-1")
 
@@ -64,22 +67,24 @@ def fit_rows(paths: list[Path]) -> list[dict]:
                 continue
             seen.add((key, setting[0], str(setting[1]), fit_seed))
             fits.append({"key": key, "variant": setting[0], "weight": setting[1], "fit_seed": fit_seed,
-                         "object_psnr": row["object_psnr"], "outside": row["opacity_outside_2px"]})
+                         "object_psnr": row["object_psnr"], "outside": row["opacity_outside_2px"],
+                         **{k: row.get(f"object_{k}_psnr") for k in _PARTS}})
     return fits
 
 
 def summary_rows(fits: list[dict]) -> list[dict]:
     """One row per capture, variant and weight: the fits' seeds, the medians, the masked bound and the two
-    targets. Captures without a masked fit get no gap."""
+    targets. Captures without a masked fit get no gap. ring_psnr and inner_psnr (the object's pixels along its
+    outline and inside it) and their masked bounds are the medians of the fits that carry them, else None."""
     rows = []
     for key in dict.fromkeys(f["key"] for f in fits):
-        masked = [f["object_psnr"] for f in fits if f["key"] == key and f["variant"] == "masked"]
-        bound = float(np.median(masked)) if masked else None
+        masked = [f for f in fits if f["key"] == key and f["variant"] == "masked"]
+        bound = _median(masked, "object_psnr")
         settings = dict.fromkeys((f["variant"], f["weight"]) for f in fits if f["key"] == key and
                                  f["variant"] != "masked")
         for variant, w in sorted(settings):
             mine = [f for f in fits if f["key"] == key and (f["variant"], f["weight"]) == (variant, w)]
-            psnr = float(np.median([f["object_psnr"] for f in mine]))
+            psnr = _median(mine, "object_psnr")
             outside = float(np.median([f["outside"] for f in mine]))
             gap = None if bound is None else psnr - bound
             rows.append({"mesh": key[0], "capture_seed": key[1], "arc_deg": key[2], "pose_noise_deg": key[3],
@@ -90,8 +95,20 @@ def summary_rows(fits: list[dict]) -> list[dict]:
                          "within_gap": None if gap is None else bool(gap >= GAP_DB),
                          "outside": round(outside, 4), "within_outside": bool(outside <= OUTSIDE),
                          "object_psnr_fits": ";".join(f"{f['object_psnr']:.2f}" for f in mine),
-                         "outside_fits": ";".join(f"{f['outside']:.4f}" for f in mine)})
+                         "outside_fits": ";".join(f"{f['outside']:.4f}" for f in mine),
+                         **{f"{k}{m}_psnr": _rounded(_median(fs, k)) for k in _PARTS
+                            for m, fs in (("", mine), ("_masked", masked))}})
     return rows
+
+
+def _median(fits: list[dict], key: str) -> float | None:
+    """Median of `key` over the fits that carry it; None where none does."""
+    values = [f[key] for f in fits if f.get(key) is not None]
+    return float(np.median(values)) if values else None
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None else round(value, 2)
 
 
 def _label(variant: str, weight: float) -> str:
@@ -154,6 +171,8 @@ def bench_capture_summary_command(args) -> int:
     _chart(out / f"{args.name}.png", rows)
     for r in rows:
         gap = "" if r["gap_db"] is None else f", gap {r['gap_db']:+.2f}"
+        if r["ring_psnr"] is not None:
+            gap += f" (outline {r['ring_psnr']:.2f}, inside {r['inner_psnr']:.2f})"
         print(f"{r['mesh']} seed {r['capture_seed']} {r['arc_deg']:g}° weight "
               f"{_label(r['variant'], r['seen_ground_weight'])}: "
               f"{r['object_psnr']:.2f} dB{gap}, {100 * r['outside']:.2f}% outside ({r['fits']} "

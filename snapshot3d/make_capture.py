@@ -2,7 +2,8 @@
 nerfstudio `transforms.json` layout (docs/capture.md): a built-in mesh on a textured ground plane in a room
 wrapped with a photo (`synth_room`), seen from a hand-held walk with OPENCV lens distortion, per-frame exposure
 and optional pose noise (`synth_camera`). Ground truth is kept aside in DIR/gt/: the object's masks, its true
-box and poses (truth.json) and a transforms_masked.json that adds the masks, for the masked fit of the same scene.
+box and poses (truth.json), a transforms_masked.json that adds the masks, for the masked fit of the same scene, and
+the object alone over white (transforms_white.json), what a fit of the object alone is scored against.
 """
 from __future__ import annotations
 
@@ -47,7 +48,8 @@ def _mesh_name(spec: str) -> str:
 def synth_capture(spec: str, cfg: SynthCaptureConfig, keep_pinhole: bool = False) -> dict:
     """Render the capture in memory. Returns a dict of arrays (N frames, H x W = size x 3/4 size):
     images (N, H, W, 3) float32 RGB as written (lens and exposure applied); masks (N, H, W) bool, the object in
-    the written images; with `keep_pinhole`, pinhole (N, H, W, 3) and pinhole_alpha (N, H, W) float32 coverage:
+    the written images; white (N, H, W, 3) float32 RGB, the object alone over white as the same camera would take
+    it (lens and exposure applied; its outline blends with white where the photos blend with the room); with `keep_pinhole`, pinhole (N, H, W, 3) and pinhole_alpha (N, H, W) float32 coverage:
     the same frames before the lens;
     c2w_true, c2w_written (N, 4, 4) float64 OpenGL; intr (4,) (fx, fy, cx, cy); gains (N, 3); box (2, 3) the
     object's true bounds; and `sources` (the photos used)."""
@@ -76,7 +78,8 @@ def synth_capture(spec: str, cfg: SynthCaptureConfig, keep_pinhole: bool = False
     n = cfg.views
     gains = np.exp2(cfg.exposure_jitter * rng.standard_normal((n, 1)) + cfg.exposure_jitter / 4 *
                     rng.standard_normal((n, 3))).astype(np.float32)
-    out = {"images": np.empty((n, h, w, 3), np.float32), "masks": np.empty((n, h, w), bool)}
+    out = {"images": np.empty((n, h, w, 3), np.float32), "masks": np.empty((n, h, w), bool),
+           "white": np.empty((n, h, w, 3), np.float32)}
     if keep_pinhole:
         out.update(pinhole=np.empty((n, h, w, 3), np.float32), pinhole_alpha=np.empty((n, h, w), np.float32))
     for j in range(0, n, CHUNK):   # the object on white, a few views at a time (memory)
@@ -86,6 +89,8 @@ def synth_capture(spec: str, cfg: SynthCaptureConfig, keep_pinhole: bool = False
             a = alpha[..., None]
             frame = expose(obj - (1 - a) + (1 - a) * render_room(room, c2w[i], big, w + 2 * px, h + 2 * py), gains[i])
             out["images"][i] = cv2.remap(frame, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            out["white"][i] = cv2.remap(expose(obj, gains[i]), map_x, map_y, cv2.INTER_LINEAR,
+                                        borderMode=cv2.BORDER_REPLICATE)
             out["masks"][i] = cv2.remap(alpha, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) >= 0.5
             if keep_pinhole:
                 out["pinhole"][i], out["pinhole_alpha"][i] = frame[py:py + h, px:px + w], alpha[py:py + h, px:px + w]
@@ -105,28 +110,35 @@ def write_capture(cap: dict, spec: str, cfg: SynthCaptureConfig, out: Path) -> N
     n, h, w = cap["masks"].shape
     (out / "images").mkdir()
     (out / "gt" / "masks").mkdir(parents=True)
+    (out / "gt" / "white").mkdir()
     k1, k2, p1, p2 = (float(c) for c in cfg.lens)
     fx, fy, cx, cy = (float(v) for v in cap["intr"])
     head = {"camera_model": "OPENCV", "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": w, "h": h,
             "k1": k1, "k2": k2, "p1": p1, "p2": p2}
-    frames, masked, true_posed, truth = [], [], [], []
+    frames, masked, true_posed, white, truth = [], [], [], [], []
     for i in range(n):
         name = f"frame_{i + 1:05d}.png"
         _png(out / "images" / name, cap["images"][i])
         _png(out / "gt" / "masks" / name, cap["masks"][i].astype(np.float32))
+        _png(out / "gt" / "white" / name, cap["white"][i])
         pose = np.round(cap["c2w_written"][i], 8).tolist()
         frames.append({"file_path": f"images/{name}", "transform_matrix": pose})
         masked.append({"file_path": f"../images/{name}", "mask_path": f"masks/{name}", "transform_matrix": pose})
         true_posed.append({**masked[-1], "transform_matrix": np.round(cap["c2w_true"][i], 8).tolist()})
+        white.append({**true_posed[-1], "file_path": f"white/{name}"})
         truth.append({"file_path": f"images/{name}", "transform_matrix": np.round(cap["c2w_true"][i], 8).tolist(),
                       "exposure_gain_rgb": [round(float(g), 5) for g in cap["gains"][i]]})
     (out / "transforms.json").write_text(json.dumps({**head, "frames": frames}, indent=1))
     (out / "gt" / "transforms_masked.json").write_text(json.dumps({**head, "frames": masked}, indent=1))
     (out / "gt" / "transforms_true.json").write_text(json.dumps({**head, "frames": true_posed}, indent=1))
+    (out / "gt" / "transforms_white.json").write_text(json.dumps({**head, "frames": white}, indent=1))
     info = {"scene": spec, "config": {**asdict(cfg), "lens": list(cfg.lens)}, "box": cap["box"].tolist(),
             "world": "z up; the object stands on the ground plane z = box[0][2] (when there is one)",
             "transforms_true": "gt/transforms_true.json: the masked capture with the true poses (what a fit is scored "
                                "on; transforms*.json carry the poses with --pose-noise-*)",
+            "transforms_white": "gt/transforms_white.json: the object alone over white (gt/white/*.png, lens and "
+                                "exposure as in the photos) at the true poses, with the masks: the clean object that "
+                                "the snapshot should carry",
             "masks": "gt/masks/*.png: 255 where the object covers at least half the pixel, in the written (distorted) "
                      "images", "sources": cap["sources"], "frames": truth}
     (out / "gt" / "truth.json").write_text(json.dumps(info, indent=1))
@@ -165,5 +177,6 @@ def make_capture_command(args) -> int:
     cfg = config_from_args(SynthCaptureConfig, args)
     out = make_capture(args.scene, args.output, cfg)
     print(f"wrote {cfg.views} frames of {cfg.size}x{max(8, round(cfg.size * 3 / 4))} to {out} (transforms.json; "
-          f"ground truth in {out / 'gt'}: masks, truth.json, transforms_masked.json, transforms_true.json)")
+          f"ground truth in {out / 'gt'}: masks, the object over white, truth.json, transforms_masked.json, "
+          f"transforms_true.json, transforms_white.json)")
     return 0

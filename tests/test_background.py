@@ -364,3 +364,29 @@ def test_a_bench_row_says_how_far_the_poses_lie_from_the_truth(capture):
                                                      occ_warmup=8))
     assert row["pose_px_written"] < 1e-3 and row["pose_px_fit"] < 1e-3, row
     assert row["object_psnr"] > 12, row
+    assert 0 < row["object_coverage"] <= 1 and min(row["object_ring_psnr"], row["object_inner_psnr"]) > 8, row
+    # scored against the object alone over white too (gt/transforms_white.json): the inside is the same pixels
+    assert abs(row["object_clean_inner_psnr"] - row["object_inner_psnr"]) < 0.05, row
+    assert row["object_clean_psnr"] > 12 and row["object_clean_ring_psnr"] != row["object_ring_psnr"], row
+
+
+def test_the_outline_split_counts_the_ring_and_the_inside_apart():
+    """A 20x20 square object in a 40x40 view: errors on its two outer pixel rows and columns fall in the ring alone,
+    errors at its centre in the inside alone; coverage is the mean opacity over the mask."""
+    from snapshot3d.train.field.object_score import outline_split
+    mask = np.zeros((40, 40), bool)
+    mask[10:30, 10:30] = True
+    gt = np.full((40, 40, 3), 0.5, np.float32)
+    acc = np.where(mask, 1.0, 0.0).astype(np.float32)
+    acc[10:20, 10:30] = 0.5
+    rgb = gt.copy()
+    rgb[10:30, 10:12] += 0.1   # the ring's left two columns
+    s = outline_split(rgb, acc, gt, mask)
+    ring = 20 * 20 - 16 * 16   # 144 pixels, 40 of them wrong by 0.1
+    assert s["object_ring_psnr"] == pytest.approx(-10 * np.log10(0.01 * 40 / ring), abs=1e-3)
+    assert s["object_inner_psnr"] == 100.0 and s["object_coverage"] == pytest.approx(0.75)
+    rgb = gt.copy()
+    rgb[19:21, 19:21] -= 0.2   # four pixels at the centre
+    s = outline_split(rgb, acc, gt, mask)
+    assert s["object_ring_psnr"] == 100.0
+    assert s["object_inner_psnr"] == pytest.approx(-10 * np.log10(0.04 * 4 / 256), abs=1e-3)

@@ -30,7 +30,8 @@ def results(tmp_path):
                                               _row("outer-noseen", 11, 25.0, 0.02, 0.0),
                                               _row("outer", 10, 23.9, 0.005, 0.3), _row("outer", 11, 23.0, 0.02, 0.3),
                                               # the same fit seeds with the object's cells spared: apart
-                                              _row("outer", 10, 24.6, 0.01, 0.3, seen_ground_spare=True)])
+                                              _row("outer", 10, 24.6, 0.01, 0.3, seen_ground_spare=True,
+                                                   object_ring_psnr=20.0, object_inner_psnr=27.0)])
     walk = _file(tmp_path / "walk.json", 0, 720.0, [_row("outer", 0, 26.0, 0.008, 0.0), _row("white", 0, 9.0, 0.5),
                                                    _row("outer-ground256", 0, 27.0, 0.001, 0.0)])
     return [a, b, walk]
@@ -52,6 +53,9 @@ def test_the_medians_over_fit_seeds_meet_the_targets_or_not(results):
     assert len(other) == 1 and other[0]["object_psnr"] == _near(27.0)
     spare = [r for r in summary_rows(fits) if r["variant"] == "outer-spare"]
     assert len(spare) == 1 and spare[0]["fits"] == 1 and spare[0]["gap_db"] == _near(-0.4)
+    # the outline's split where the rows carry it, else None (the masked fit here predates it)
+    assert spare[0]["ring_psnr"] == _near(20.0) and spare[0]["inner_psnr"] == _near(27.0)
+    assert spare[0]["ring_masked_psnr"] is None and seen["ring_psnr"] is None
     totals = _totals(list(rows.values()))
     assert totals["0"] == {"captures": 2, "within_gap": 1, "within_outside": 2, "both": 1, "median_fits": 2.0}
     assert totals["0.3"]["both"] == 0
@@ -63,6 +67,7 @@ def test_the_command_writes_its_files_and_refuses_what_is_not_a_result(results, 
     assert proc.returncode == 0, proc.stderr
     assert "spot seed 0 120° weight 0: 24.00 dB, gap -1.00, 2.00% outside (3 fits)" in proc.stdout
     assert "spot seed 0 720° weight 0 (outer-ground256): 27.00 dB, 0.10% outside (1 fit)" in proc.stdout
+    assert "0.3 (outer-spare): 24.60 dB, gap -0.40 (outline 20.00, inside 27.00), 1.00% outside" in proc.stdout
     assert {p.name for p in out.iterdir()} == {"s.json", "s.csv", "s.png"}
     assert json.loads((out / "s.json").read_text())["totals"]["0.3"]["captures"] == 1
     bad = tmp_path / "bad.json"

@@ -58,6 +58,18 @@ def test_loads_through_the_capture_reader_with_the_lens_undone(capture):
     np.testing.assert_allclose(true.c2w, cap["c2w_true"], atol=1e-5)
     np.testing.assert_array_equal(true.alpha, masked.alpha)
     assert np.abs(cap["c2w_true"] - cap["c2w_written"]).max() > 1e-3
+    # the object alone over white, at the true poses: the photos' own pixels inside the mask (away from the
+    # outline, where the photos blend in the room), white outside it (as bright as the frame's exposure lets)
+    white = load_scene(str(folder / "gt" / "transforms_white.json"), capture=KEEP)
+    np.testing.assert_allclose(white.c2w, cap["c2w_true"], atol=1e-5)
+    np.testing.assert_array_equal(white.alpha, masked.alpha)
+    for i in range(CFG.views):
+        inner = cv2.erode((cap["masks"][i]).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        outside = cv2.dilate((cap["masks"][i]).astype(np.uint8), np.ones((5, 5), np.uint8)) == 0
+        assert inner.sum() > 100 and outside.sum() > 100
+        assert np.abs(cap["white"][i][inner] - cap["images"][i][inner]).max() < 1e-6
+        grey = min(1.0, float(cap["gains"][i].min()) ** (1 / 2.2)) - 1e-3   # white at the frame's exposure
+        assert cap["white"][i][outside].min() > grey and cap["images"][i][outside].min() < 0.9
 
 
 def test_gt_masks_hold_the_projected_mesh(capture):

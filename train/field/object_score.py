@@ -13,7 +13,25 @@ from .field import decode, sample_planes
 from .render import occupancy_from_planes, render_pixels, render_rays
 from .sampler import BoxFrame
 
-__all__ = ["score_object", "density_share_outside_box"]
+__all__ = ["score_object", "outline_split", "density_share_outside_box"]
+
+RING_PX = 2   # the outline's ring: the true mask's pixels within this many pixels of its edge
+
+
+def _psnr(err: np.ndarray) -> float:
+    """dB of squared errors `err` (any shape, values of [0, 1]^2); an empty set reads as perfect (100 dB)."""
+    return -10 * np.log10(max(float(err.mean()), 1e-10)) if err.size else 100.0
+
+
+def outline_split(rgb: np.ndarray, acc: np.ndarray, gt: np.ndarray, mask: np.ndarray, ring_px: int = RING_PX) -> dict:
+    """One view: rgb, gt (H, W, 3) RGB [0, 1], acc (H, W) the planes' opacity, mask (H, W) bool the object's true
+    mask -> object_ring_psnr: dB over the mask's pixels within `ring_px` of its edge (where rays that graze the
+    object pass); object_inner_psnr: dB over the rest of the mask; object_coverage: mean opacity inside the mask
+    (1: the planes cover all of the object; lower: parts of it are explained by the background or left empty)."""
+    inner = cv2.erode(mask.astype(np.uint8), np.ones((2 * ring_px + 1,) * 2, np.uint8), borderValue=1) > 0
+    err = (rgb - gt) ** 2
+    return {"object_ring_psnr": _psnr(err[mask & ~inner]), "object_inner_psnr": _psnr(err[inner]),
+            "object_coverage": float(acc[mask].mean()) if mask.any() else 1.0}
 
 
 @torch.no_grad()
@@ -32,14 +50,18 @@ def density_share_outside_box(planes: torch.Tensor, decoder, box, true_box, res:
 
 @torch.no_grad()
 def score_object(planes: torch.Tensor, decoder, box, truth: PosedImages, true_box, views=None,
-                 chunk: int = 8192) -> dict:
+                 chunk: int = 8192, clean: PosedImages | None = None) -> dict:
     """planes (3, C, R, R) over world `box` (2, 3), rendered over white at `views` (default truth.test) of `truth`
     (the capture read with its true masks: alpha (N, H, W) coverage, images white outside the object) ->
     object_psnr: dB inside the true mask (alpha >= 0.5), mean over views;
     white_psnr: dB of the whole view against the object on white (floaters count);
     opacity_outside: share of the planes' opacity summed over the views' pixels that falls outside the mask;
     opacity_outside_2px: the same outside the mask grown by 2 pixels (edges and the mask's own rounding forgiven);
-    density_outside_box: `density_share_outside_box` against `true_box`."""
+    object_ring_psnr, object_inner_psnr, object_coverage: `outline_split`'s, mean over views;
+    density_outside_box: `density_share_outside_box` against `true_box`;
+    with `clean` (the object alone over white at the same frames, make-capture's gt/transforms_white.json):
+    object_clean_psnr, object_clean_ring_psnr, object_clean_inner_psnr, the same in the same masks against it
+    (the photos' outline blends the object with the room, which a fit of the object alone does not carry)."""
     if truth.alpha is None:
         raise ValueError("score_object needs the capture read with its true masks")
     views = truth.test if views is None else views
@@ -48,16 +70,23 @@ def score_object(planes: torch.Tensor, decoder, box, truth: PosedImages, true_bo
     views = np.asarray(views)
     rgbs, accs = render_pixels(lambda o, d: render_rays(planes, decoder, frame, occ, o, d)[:2], frame, truth.c2w[views],
                                truth.intrinsics[views], truth.width, truth.height, chunk)
-    obj, white, acc_in, acc_near, acc_all = [], [], 0.0, 0.0, 0.0
+    obj, white, split, acc_in, acc_near, acc_all = [], [], [], 0.0, 0.0, 0.0
     for i, rgb, acc in zip(views, rgbs, accs):
         mask, gt = truth.alpha[i] >= 0.5, truth.images[i]
         err = (rgb - gt) ** 2
-        obj.append(-10 * np.log10(max(float(err[mask].mean()), 1e-10)))
-        white.append(-10 * np.log10(max(float(err.mean()), 1e-10)))
+        obj.append(_psnr(err[mask]))
+        white.append(_psnr(err))
+        split.append(outline_split(rgb, acc, gt, mask))
+        if clean is not None:
+            on_white = outline_split(rgb, acc, clean.images[i], mask)
+            split[-1].update({"object_clean_psnr": _psnr(((rgb - clean.images[i]) ** 2)[mask]),
+                              "object_clean_ring_psnr": on_white["object_ring_psnr"],
+                              "object_clean_inner_psnr": on_white["object_inner_psnr"]})
         near = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         acc_in, acc_near, acc_all = acc_in + float(acc[mask].sum()), acc_near + float(acc[near].sum()), \
             acc_all + float(acc.sum())
     return {"object_psnr": float(np.mean(obj)), "white_psnr": float(np.mean(white)),
             "opacity_outside": float(1 - acc_in / max(acc_all, 1e-12)),
             "opacity_outside_2px": float(1 - acc_near / max(acc_all, 1e-12)),
+            **{k: float(np.mean([v[k] for v in split])) for k in split[0]},
             "density_outside_box": density_share_outside_box(planes, decoder, box, true_box)}
