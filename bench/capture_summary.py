@@ -21,9 +21,9 @@ GAP_DB = -1.5     # the object within 1.5 dB of the masked fit (issue 40)
 OUTSIDE = 0.02    # at most 2% of the opacity outside the true mask + 2 px
 
 
-# the object's pixels split along its outline (score_object's object_ring_psnr, object_inner_psnr), where the rows
-# carry them (since 2026-12-07)
-_PARTS = ("ring", "inner")
+# score_object's object_{part}_psnr where the rows carry them (since 2026-12-07): the object's pixels along its
+# outline and inside it, and the same three against the object alone over white (clean)
+_PARTS = ("ring", "inner", "clean", "clean_ring", "clean_inner")
 # the modes that differ from `outer` by --seen-ground-weight alone: one setting each, by the weight
 _WEIGHT_ONLY = ("outer", "outer-noseen", "outer-seen", "outer-seen-03", "outer-seen-1")
 
@@ -96,9 +96,17 @@ def summary_rows(fits: list[dict]) -> list[dict]:
                          "outside": round(outside, 4), "within_outside": bool(outside <= OUTSIDE),
                          "object_psnr_fits": ";".join(f"{f['object_psnr']:.2f}" for f in mine),
                          "outside_fits": ";".join(f"{f['outside']:.4f}" for f in mine),
-                         **{f"{k}{m}_psnr": _rounded(_median(fs, k)) for k in _PARTS
-                            for m, fs in (("", mine), ("_masked", masked))}})
+                         **_parts(mine, masked)})
     return rows
+
+
+def _parts(mine: list[dict], masked: list[dict]) -> dict:
+    """The _PARTS medians of the fits `mine` and of the `masked` bound ({part}_psnr, {part}_masked_psnr), and the
+    clean gap and its target (clean_gap_db, within_clean_gap); None where the fits do not carry them."""
+    out = {f"{k}{m}_psnr": _median(fs, k) for k in _PARTS for m, fs in (("", mine), ("_masked", masked))}
+    gap = None if None in (out["clean_psnr"], out["clean_masked_psnr"]) else out["clean_psnr"] - out["clean_masked_psnr"]
+    return {**{k: _rounded(v) for k, v in out.items()}, "clean_gap_db": _rounded(gap),
+            "within_clean_gap": None if gap is None else bool(gap >= GAP_DB)}
 
 
 def _median(fits: list[dict], key: str) -> float | None:
@@ -125,6 +133,10 @@ def _totals(rows: list[dict]) -> dict:
         out[_label(variant, w)] = {"captures": len(mine), "within_gap": sum(bool(r["within_gap"]) for r in mine),
                                    "within_outside": sum(r["within_outside"] for r in mine),
                                    "both": sum(bool(r["within_gap"]) and r["within_outside"] for r in mine),
+                                   # against the object alone over white, of the captures scored so
+                                   "clean_captures": sum(r["within_clean_gap"] is not None for r in mine),
+                                   "within_clean_gap": sum(bool(r["within_clean_gap"]) for r in mine),
+                                   "both_clean": sum(bool(r["within_clean_gap"]) and r["within_outside"] for r in mine),
                                    "median_fits": float(np.median([r["fits"] for r in mine]))}
     return out
 
@@ -173,12 +185,16 @@ def bench_capture_summary_command(args) -> int:
         gap = "" if r["gap_db"] is None else f", gap {r['gap_db']:+.2f}"
         if r["ring_psnr"] is not None:
             gap += f" (outline {r['ring_psnr']:.2f}, inside {r['inner_psnr']:.2f})"
+        if r["clean_gap_db"] is not None:
+            gap += f", on white {r['clean_psnr']:.2f} dB, gap {r['clean_gap_db']:+.2f}"
         print(f"{r['mesh']} seed {r['capture_seed']} {r['arc_deg']:g}° weight "
               f"{_label(r['variant'], r['seen_ground_weight'])}: "
               f"{r['object_psnr']:.2f} dB{gap}, {100 * r['outside']:.2f}% outside ({r['fits']} "
               f"fit{'s' if r['fits'] > 1 else ''})")
     for w, t in report["totals"].items():
+        clean = f"; on white, of {t['clean_captures']}: within the gap {t['within_clean_gap']}, both " \
+            f"{t['both_clean']}" if t["clean_captures"] else ""
         print(f"weight {w}: within the gap {t['within_gap']} of {t['captures']}, floaters {t['within_outside']}, "
-              f"both {t['both']}")
+              f"both {t['both']}{clean}")
     print(f"wrote {out / args.name}.json, .csv and .png")
     return 0

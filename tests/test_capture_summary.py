@@ -57,7 +57,8 @@ def test_the_medians_over_fit_seeds_meet_the_targets_or_not(results):
     assert spare[0]["ring_psnr"] == _near(20.0) and spare[0]["inner_psnr"] == _near(27.0)
     assert spare[0]["ring_masked_psnr"] is None and seen["ring_psnr"] is None
     totals = _totals(list(rows.values()))
-    assert totals["0"] == {"captures": 2, "within_gap": 1, "within_outside": 2, "both": 1, "median_fits": 2.0}
+    assert totals["0"] == {"captures": 2, "within_gap": 1, "within_outside": 2, "both": 1, "clean_captures": 0,
+                           "within_clean_gap": 0, "both_clean": 0, "median_fits": 2.0}
     assert totals["0.3"]["both"] == 0
 
 
@@ -77,3 +78,20 @@ def test_the_command_writes_its_files_and_refuses_what_is_not_a_result(results, 
     proc = run_cli("bench", "capture-summary", str(tmp_path / "absent.json"), "--out", str(tmp_path / "none"))
     assert_one_line_error(proc, "absent.json: no such results file")
     assert not (tmp_path / "none").exists()
+
+
+def test_the_gap_against_the_object_over_white_is_counted_apart(tmp_path):
+    """Fits scored against the object alone over white too (object_clean_psnr) get their own gap and target; the
+    photos' gap is left as it was."""
+    from snapshot3d.bench.capture_summary import _totals, fit_rows, summary_rows
+    clean = {"masked": 25.0, 10: 24.0, 11: 23.0}
+    rows = [_row("masked", 0, 24.0, 0.0, object_clean_psnr=clean["masked"]),
+            _row("outer", 10, 21.0, 0.01, 0.3, object_clean_psnr=clean[10]),
+            _row("outer", 11, 22.0, 0.025, 0.3, object_clean_psnr=clean[11])]
+    summary = summary_rows(fit_rows([_file(tmp_path / "c.json", 1, 120.0, rows)]))
+    (row,) = [r for r in summary if r["variant"] == "outer"]
+    assert row["gap_db"] == _near(-2.5) and not row["within_gap"]
+    assert row["clean_psnr"] == _near(23.5) and row["clean_masked_psnr"] == _near(25.0)
+    assert row["clean_gap_db"] == _near(-1.5) and row["within_clean_gap"] and row["within_outside"]
+    assert _totals([row])["0.3"] == {"captures": 1, "within_gap": 0, "within_outside": 1, "both": 0,
+                                     "clean_captures": 1, "within_clean_gap": 1, "both_clean": 1, "median_fits": 2.0}
