@@ -3,7 +3,9 @@
 without masks with the background model (fit --background outer, the box found automatically), and with the
 true masks. Each fit is scored on the held-out frames against the capture's ground truth
 (`train/field/object_score.py`): the object's PSNR inside its true mask, the share of the planes' opacity outside
-the mask, and the share of their density outside the true box. Writes capture_background.{json,csv}."""
+the mask, and the share of their density outside the true box; each capture's `ceilings`: what the object alone,
+rendered perfectly, scores by those measures (its photos' outline blends in the room). Writes
+capture_background.{json,csv}."""
 from __future__ import annotations
 
 import json
@@ -127,6 +129,17 @@ def fit_and_score(cap: Path, mode: str, cfg: FitConfig, figure: Path | None = No
             **({"pose_refinement": report["pose_refinement"]} if "pose_refinement" in report else {})}
 
 
+def _ceiling(cap: Path) -> dict:
+    """The capture's `clean_ceiling`: the object alone over white scored as a render against its masked photos
+    (held-out frames, true poses) -> object_psnr, object_ring_psnr, object_inner_psnr."""
+    from snapshot3d.loaders import load_scene
+    from snapshot3d.train.field.object_score import clean_ceiling
+
+    up = CaptureOptions(up=(0.0, 0.0, 1.0))
+    return clean_ceiling(load_scene(str(cap / "gt/transforms_true.json"), capture=up),
+                         load_scene(str(cap / "gt/transforms_white.json"), capture=up))
+
+
 def _side_by_side(path: Path, scene, truth, photos: np.ndarray, renders: np.ndarray, decoder, views: int = 3) -> None:
     """PNG of `views` held-out frames, one per row: the input photo (`photos` (N, H, W, 3) RGB, the capture as
     read), the fit with its background model behind the planes (`renders`, (V, H, W, 3) RGB of the held-out
@@ -182,11 +195,12 @@ def bench_capture_background_command(args) -> int:
                                 pose_noise_deg=getattr(args, "pose_noise_deg", 0.0),
                                 pose_noise_frac=getattr(args, "pose_noise_frac", 0.0),
                                 arc_deg=getattr(args, "arc_deg", 720.0))
-    rows, name = [], getattr(args, "name", None) or "capture_background"
+    rows, ceilings, name = [], {}, getattr(args, "name", None) or "capture_background"
     fit_seeds = _fit_seeds(getattr(args, "fit_seeds", None), args.seed)
     with tempfile.TemporaryDirectory() as tmp:
         for mesh in args.meshes.split(","):
             cap = make_capture(f"builtin:{mesh}", Path(tmp) / mesh, capcfg)
+            ceilings[mesh] = {k: round(v, 4) for k, v in _ceiling(cap).items()}
             for mode in args.modes.split(","):
                 for fit_seed in fit_seeds:   # the same capture fitted again: the fits' own spread
                     fig = out / f"{name}_side_by_side_{mesh}.png" if getattr(args, "figure", False) and \
@@ -196,7 +210,7 @@ def bench_capture_background_command(args) -> int:
                     print(json.dumps(row), flush=True)
                     rows.append(row)
     report = {"meta": run_metadata(), "fit": asdict(cfg), "capture": {**asdict(capcfg), "lens": list(capcfg.lens)},
-              "rows": rows}
+              "ceilings": ceilings, "rows": rows}
     (out / f"{name}.json").write_text(json.dumps(report, indent=1))
     write_rows(out / f"{name}.csv", rows)
     print(f"wrote {out / name}.json and .csv ({len(rows)} fits)")

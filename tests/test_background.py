@@ -390,3 +390,12 @@ def test_the_outline_split_counts_the_ring_and_the_inside_apart():
     s = outline_split(rgb, acc, gt, mask)
     assert s["object_ring_psnr"] == 100.0
     assert s["object_inner_psnr"] == pytest.approx(-10 * np.log10(0.04 * 4 / 256), abs=1e-3)
+
+
+def test_the_object_alone_scores_below_perfect_only_along_its_outline(capture):
+    """The clean ceiling of a capture: the object over white taken as the render matches the masked photos inside
+    the outline's ring (the same pixels) and not along it, where the photos blend in the room."""
+    from snapshot3d.bench.capture_background import _ceiling
+    c = _ceiling(capture)
+    assert c["object_inner_psnr"] > 45, c
+    assert 12 < c["object_ring_psnr"] < 35 and c["object_ring_psnr"] < c["object_psnr"] < c["object_inner_psnr"], c

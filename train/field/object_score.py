@@ -13,7 +13,7 @@ from .field import decode, sample_planes
 from .render import occupancy_from_planes, render_pixels, render_rays
 from .sampler import BoxFrame
 
-__all__ = ["score_object", "outline_split", "density_share_outside_box"]
+__all__ = ["score_object", "outline_split", "clean_ceiling", "density_share_outside_box"]
 
 RING_PX = 2   # the outline's ring: the true mask's pixels within this many pixels of its edge
 
@@ -32,6 +32,22 @@ def outline_split(rgb: np.ndarray, acc: np.ndarray, gt: np.ndarray, mask: np.nda
     err = (rgb - gt) ** 2
     return {"object_ring_psnr": _psnr(err[mask & ~inner]), "object_inner_psnr": _psnr(err[inner]),
             "object_coverage": float(acc[mask].mean()) if mask.any() else 1.0}
+
+
+def clean_ceiling(truth: PosedImages, clean: PosedImages, views=None) -> dict:
+    """What a fit that renders the object alone perfectly would score against the photos: `clean` (the object over
+    white, make-capture's gt/transforms_white.json) taken as the render, scored against `truth` (the masked photos)
+    inside the true masks at `views` (default truth.test) -> object_psnr, object_ring_psnr, object_inner_psnr (the
+    names of `score_object`'s, means over views); the photos' outline blends the room in, so this lies below a
+    perfect score, most where the room is dark or busy."""
+    views = truth.test if views is None else views
+    obj, split = [], []
+    for i in np.asarray(views):
+        mask = truth.alpha[i] >= 0.5
+        obj.append(_psnr(((clean.images[i] - truth.images[i]) ** 2)[mask]))
+        split.append(outline_split(clean.images[i], np.ones(mask.shape, np.float32), truth.images[i], mask))
+    return {"object_psnr": float(np.mean(obj)), **{k: float(np.mean([v[k] for v in split]))
+                                                   for k in ("object_ring_psnr", "object_inner_psnr")}}
 
 
 @torch.no_grad()
