@@ -63,6 +63,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-seen-1": ("transforms.json", "outer", "auto", {"seen_ground_weight": 1.0}),
          # the same rays sparing the samples in the object's cells (--seen-ground-spare; its rows say so)
          "outer-spare": ("transforms.json", "outer", "auto", {"seen_ground_spare": True}),
+         # the batches drawn from the rays that cross the object's cells, as from masks (--object-rays)
+         "outer-rays": ("transforms.json", "outer", "auto", {"object_rays": True}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),

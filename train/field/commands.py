@@ -220,6 +220,7 @@ def _tightened(posed, decoder, cfg, device, quiet: bool, late_start: bool = Fals
         # the object's cells (G, G, G) over the box they were found in, not reported: what --seen-ground-spare spares
         info_ground.update(object_cells=cells, object_cells_box=np.asarray(cells_over, np.float32))
         info["seen_ground_spare"] = bool(cfg.seen_ground_spare and cfg.seen_ground_weight > 0 and cells.any())
+        info["object_rays"] = bool(cfg.object_rays and cells.any())   # fit.new_state draws them (--object-rays)
         ground += f", then cut round the object's cells of a {more['object_box_steps']}-step fit"
     source = (f"{info['sparse_points']} sparse points of the photos ({info['object_points']} on the object)"
               if info["box_from"] == "sparse points" else f"{info['prefit_steps']} steps' density")

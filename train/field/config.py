@@ -93,6 +93,9 @@ class FitConfig:
                                            "that rays passing close by the object do not wear its edge away (on "
                                            "the 120 deg arcs: +0.3 dB, the floaters over 2% on 2 of 7; off by "
                                            "default, docs/capture.md)")
+    object_rays: bool = config_field(False, "with --background outer, --object-box and no masks: draw "
+                                     "--fg-fraction of each batch from the rays that cross the object-box fit's "
+                                     "cells, as a fit given masks draws them from the masks (docs/capture.md)")
     wall_margin: float = config_field(0.15, "with --background outer: depth of the walls' and the floor's bands, a "
                                       "fraction of the box's half-size (at most 0.25)")
     refine_poses: str = config_field("auto", "learn a small correction of each training view's pose with the "

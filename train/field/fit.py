@@ -105,7 +105,13 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
         from .pose_refine import PoseRefine
         poses = PoseRefine(len(posed.train)).to(device)
         pose_opt = torch.optim.Adam(poses.parameters(), lr=cfg.pose_lr)
-    return FitState(planes, occ, frame, make_rays(posed, posed.train, frame, cfg.random_background).to(device), opt,
+    bank = make_rays(posed, posed.train, frame, cfg.random_background)
+    if bank.fg is None and cfg.object_rays and posed.info.get("object_cells") is not None:   # docs/capture.md
+        from .object_rays import object_ray_index
+        tr = posed.train
+        bank.fg = torch.from_numpy(object_ray_index(posed.info["object_cells"], posed.info["object_cells_box"],
+                                                    posed.c2w[tr], posed.intrinsics[tr], posed.height, posed.width))
+    return FitState(planes, occ, frame, bank.to(device), opt,
                     channel=new_state_channel(cfg, device), background=bg, bg_opt=bg_opt, poses=poses,
                     pose_opt=pose_opt, ground=_ground_rays(posed, cfg, bg is not None))
 
