@@ -21,7 +21,7 @@ def add_dataclass_options(parser: argparse.ArgumentParser, cls, skip: tuple = ()
         if f.name in skip:
             continue
         flag = "--" + f.name.replace("_", "-")
-        help_ = f.metadata.get("help", "") or " "
+        help_ = (f.metadata.get("help", "") or " ").replace("%", "%%")   # plain text, not an argparse template
         if f.type in (bool, "bool"):
             parser.add_argument(flag, dest=f.name, action=argparse.BooleanOptionalAction, default=f.default, help=help_)
         elif f.type in (tuple, "tuple"):  # one or more values of the default's element type
