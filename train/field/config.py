@@ -95,7 +95,8 @@ class FitConfig:
                                            "default, docs/capture.md)")
     object_rays: bool = config_field(False, "with --background outer, --object-box and no masks: draw "
                                      "--fg-fraction of each batch from the rays that cross the object-box fit's "
-                                     "cells, as a fit given masks draws them from the masks (docs/capture.md)")
+                                     "cells, as a fit given masks draws them from the masks (spot's 120 deg arc, "
+                                     "one fit: -1.5 dB and 2.8% outside against 1.0%; off, docs/capture.md)")
     wall_margin: float = config_field(0.15, "with --background outer: depth of the walls' and the floor's bands, a "
                                       "fraction of the box's half-size (at most 0.25)")
     refine_poses: str = config_field("auto", "learn a small correction of each training view's pose with the "
