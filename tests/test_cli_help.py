@@ -22,6 +22,5 @@ def test_every_help_text_formats():
 
 
 def test_a_percent_sign_in_an_option_s_help_is_text():
-    from snapshot3d.cli import fit   # noqa: F401  (the parsers' module)
-    help_ = build_parser()._subparsers._group_actions[0].choices["fit"].format_help()
+    (help_,) = [p.format_help() for name, p in _parsers(build_parser()) if name == "snapshot3d fit"]
     assert "2.8% outside" in " ".join(help_.split())
