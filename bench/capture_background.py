@@ -65,6 +65,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-spare": ("transforms.json", "outer", "auto", {"seen_ground_spare": True}),
          # the batches drawn from the rays that cross the object's cells, as from masks (--object-rays)
          "outer-rays": ("transforms.json", "outer", "auto", {"object_rays": True}),
+         # the ground's texture twice as wide (and as fine), the rays past the box's sides ending on it
+         "outer-reach2": ("transforms.json", "outer", "auto", {"ground_reach": 2.0, "ground_texture": 256}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),

@@ -399,3 +399,25 @@ def test_the_object_alone_scores_below_perfect_only_along_its_outline(capture):
     c = _ceiling(capture)
     assert c["object_inner_psnr"] > 45, c
     assert 12 < c["object_ring_psnr"] < 35 and c["object_ring_psnr"] < c["object_psnr"] < c["object_inner_psnr"], c
+
+
+def test_a_wider_ground_ends_the_rays_that_leave_through_the_box_s_sides():
+    """The box [-1, 1]^3 (q = unit), the ground 0.5 under its floor: a ray leaving through a side, going down,
+    meets the plane at x = 1.75 (within a reach of 2, past it at 1.5); the texture there is read at x / 2. A ray
+    through the floor ends there at any reach; one going up never does."""
+    from snapshot3d.train.field.background import floor_colour
+    frame = BoxFrame.from_box(np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]), "cpu")
+    assert torch.allclose(frame.half_unit, torch.ones(3))
+    floor = torch.zeros(1, 3, 8, 8)
+    floor[0, 0, :, 7] = 5.0   # red in the texture's last column: x in (0.75, 1] of its span
+    d = torch.nn.functional.normalize(torch.tensor([[1.0, 0.0, -1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 1.0]]), dim=-1)
+    o = torch.tensor([[0.25, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    t_out = torch.tensor([0.75 * 2 ** 0.5, 1.0, 2 ** 0.5])   # the side x = 1, the floor, the side
+    hit = torch.ones(3, dtype=torch.bool)
+    down, rgb = floor_colour(floor, frame, o, d, t_out, hit, depth=0.5, reach=2.0)
+    assert down.tolist() == [True, True, False]
+    assert rgb[0, 0] > 0.99 and rgb[1, 0] == pytest.approx(0.5)   # x = 1.75 -> 0.875 of the span: red; x = 0: not
+    down, _ = floor_colour(floor, frame, o, d, t_out, hit, depth=0.5, reach=1.5)
+    assert down.tolist() == [False, True, False]
+    down, _ = floor_colour(floor, frame, o, d, t_out, hit, depth=0.5)   # reach 1: the floor alone, as before
+    assert down.tolist() == [False, True, False]

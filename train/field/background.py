@@ -41,9 +41,10 @@ class OuterField(nn.Module):
     """Holds the outer grid (1, 4, G, G, G): density logit and RGB logits over contracted [-2, 2]^3 (the grid's
     last axis follows x, as `grid_sample` reads it), the colour per direction (1, 3, *ENV_SIZE) logits, and with
     `floor` > 0 the ground's colour (1, 3, floor, floor) logits over the box's floor x (last axis), y, on a plane
-    `floor_depth` q units below it."""
+    `floor_depth` q units below it, spanning `floor_reach` times the floor about its centre."""
 
-    def __init__(self, res: int = 48, init_density: float = -4.0, floor: int = 0, floor_depth: float = 0.0):
+    def __init__(self, res: int = 48, init_density: float = -4.0, floor: int = 0, floor_depth: float = 0.0,
+                 floor_reach: float = 1.0):
         super().__init__()
         grid = torch.zeros(1, 4, res, res, res)
         grid[:, 0] = init_density
@@ -51,13 +52,24 @@ class OuterField(nn.Module):
         self.env = nn.Parameter(torch.zeros(1, 3, *ENV_SIZE))
         self.floor = nn.Parameter(torch.zeros(1, 3, floor, floor)) if floor else None
         self.floor_depth = floor_depth
+        self.floor_reach = floor_reach
 
 
 def floor_colour(floor: Tensor, frame: BoxFrame, o: Tensor, d: Tensor, t_out: Tensor,
-                 hit: Tensor, depth: float = 0.0) -> tuple[Tensor, Tensor]:
+                 hit: Tensor, depth: float = 0.0, reach: float = 1.0) -> tuple[Tensor, Tensor]:
     """Where q-space rays (N, 3) leave the box (at t_out (N,), `hit` (N,) bool) through its floor, the ground's
     colour on the plane `depth` (q units) below that floor, where they meet it: -> (N,) bool, RGB (N, 3) in
-    [0, 1] from `floor` (1, 3, F, F) logits (bilinear, over the floor's x, y)."""
+    [0, 1] from `floor` (1, 3, F, F) logits (bilinear, over the floor's x, y). With `reach` > 1 the texture spans
+    `reach` times the floor about its centre, and every ray that meets the plane within it past the box (t_out,
+    the closest approach for rays that miss the box) ends there, through the box's sides too."""
+    if reach > 1:
+        z = -frame.half_unit[2] - depth   # the plane, q space
+        t = (z - o[:, 2]) / d[:, 2].clamp(max=-1e-6)
+        u = frame.q_to_unit(o + t[:, None] * d)[:, :2] / reach
+        down = (d[:, 2] < -1e-6) & (t >= t_out - 1e-6) & (u.abs().amax(dim=-1) <= 1)
+        g = u.clamp(-1, 1).view(1, 1, -1, 2)
+        return down, torch.sigmoid(F.grid_sample(floor, g, mode="bilinear", padding_mode="border",
+                                                 align_corners=False)[0, :, 0].t())
     exit_ = o + t_out[:, None] * d
     down = hit & (d[:, 2] < 0) & (frame.q_to_unit(exit_)[:, 2] <= -1 + 1e-3)
     u = frame.q_to_unit(exit_ + d * (depth / (-d[:, 2]).clamp(min=1e-3))[:, None])
@@ -117,7 +129,7 @@ def render_with_background(planes: Tensor, decoder, frame: BoxFrame, occ: Tensor
     sigma, rgb = sigma.view(t.shape), rgb.view(*t.shape, 3)
     after, _, _ = composite(sigma[:, samples:], rgb[:, samples:], da, env_colour(bg.env, d))
     if bg.floor is not None:   # the box's floor is the ground: a ray that leaves through it ends there
-        down, ground = floor_colour(bg.floor, frame, o, d, t_out, hit, bg.floor_depth)
+        down, ground = floor_colour(bg.floor, frame, o, d, t_out, hit, bg.floor_depth, bg.floor_reach)
         after = torch.where(down[:, None], ground, after)
     box, acc, n_box, *weights = render_rays(planes, decoder, frame, occ, o, d, jitter=jitter, generator=generator,
                                             min_transmittance=min_transmittance, background=after, with_weights=extras)

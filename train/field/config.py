@@ -68,6 +68,9 @@ class FitConfig:
                                        "box's floor cut there): texels per side of a colour texture on the ground "
                                        "under that floor, the ground's look where it meets the object (part of the "
                                        "background model, never carried; 0: off; docs/capture.md)")
+    ground_reach: float = config_field(1.0, "with --ground-texture: the texture spans this many times the box's "
+                                       "floor about its centre, and rays that leave the box through its sides end on "
+                                       "it too (the ground just round the object, else the coarse outer field's)")
     ground_depth: float = config_field(-1.0, "with --ground-texture: how far below the box's floor the texture's "
                                        "plane lies (world units); -1: where the ground is, the floor's lift over the "
                                        "ground that the sparse points found (0 where a pre-fit's density found it, "
@@ -179,6 +182,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("background-samples", cfg.background_samples >= 2, ">= 2"),
         ("ground-texture", 0 <= cfg.ground_texture <= 1024, "in 0..1024"),
         ("ground-depth", cfg.ground_depth >= 0 or cfg.ground_depth == -1, ">= 0, or -1 (where the ground is)"),
+        ("ground-reach", 1 <= cfg.ground_reach <= 16, "in [1, 16]"),
         ("seen-ground-weight", cfg.seen_ground_weight >= 0 or cfg.seen_ground_weight == -1, ">= 0, or -1 (auto)"),
         ("object-steps", 0 <= cfg.object_steps <= 4, "in [0, 4]"),
         ("object-box", 0 <= cfg.object_box <= 1, "in [0, 1]"),

@@ -98,7 +98,7 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
         ground = posed.info.get("ground_z") is not None   # the box's floor is the ground (commands._tightened)
         depth = cfg.ground_depth if cfg.ground_depth >= 0 else posed.info.get("ground_depth", 0.0)
         bg = OuterField(cfg.background_res, floor=cfg.ground_texture if ground else 0,
-                        floor_depth=depth / frame.scale).to(device)
+                        floor_depth=depth / frame.scale, floor_reach=cfg.ground_reach).to(device)
         bg_opt = torch.optim.Adam(bg.parameters(), lr=cfg.background_lr)
     poses = pose_opt = None
     if cfg.refine_poses == "on":
