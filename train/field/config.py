@@ -70,7 +70,8 @@ class FitConfig:
                                        "background model, never carried; 0: off; docs/capture.md)")
     ground_reach: float = config_field(1.0, "with --ground-texture: the texture spans this many times the box's "
                                        "floor about its centre, and rays that leave the box through its sides end on "
-                                       "it too (the ground just round the object, else the coarse outer field's)")
+                                       "it too (the ground just round the object, else the coarse outer field's; "
+                                       "at 2 on three 120 deg arcs: -0.3 to -0.4 dB, so 1; docs/capture.md)")
     ground_depth: float = config_field(-1.0, "with --ground-texture: how far below the box's floor the texture's "
                                        "plane lies (world units); -1: where the ground is, the floor's lift over the "
                                        "ground that the sparse points found (0 where a pre-fit's density found it, "
