@@ -74,8 +74,9 @@ def fit_rows(paths: list[Path]) -> list[dict]:
 
 def summary_rows(fits: list[dict]) -> list[dict]:
     """One row per capture, variant and weight: the fits' seeds, the medians, the masked bound and the two
-    targets. Captures without a masked fit get no gap. ring_psnr and inner_psnr (the object's pixels along its
-    outline and inside it) and their masked bounds are the medians of the fits that carry them, else None."""
+    targets. Captures without a masked fit get no gap. The _PARTS (`_parts`: the object's pixels along its
+    outline and inside it, and all three against the object alone over white, with the clean gap) are the
+    medians of the fits that carry them, else None."""
     rows = []
     for key in dict.fromkeys(f["key"] for f in fits):
         masked = [f for f in fits if f["key"] == key and f["variant"] == "masked"]
