@@ -156,9 +156,9 @@ def object_box(posed: PosedImages, decoder, cfg: FitConfig, device=None) -> tupl
     with the background model, the object's cells of its planes (`object_carve.object_cells`, as the object-alone
     step finds them), and `cells_box` round them -> (box (2, 3) float32 world, info for the report, the object's
     cells (GRID, GRID, GRID) bool [ix, iy, iz] over posed.box, which the ground rays spare with
-    --seen-ground-spare: `seen_ground.clear_opacity`). After the pre-fit the density is too diffuse for a tight cut (docs/capture.md);
-    after this longer fit the object's cells lie within a few cells of the object, and 16x4 planes spread over a
-    box 1.5 times too wide lose 1-2 dB."""
+    --seen-ground-spare: `seen_ground.clear_opacity`). After the pre-fit the density is too diffuse for a tight
+    cut (docs/capture.md); after this longer fit the object's cells lie within a few cells of the object, and 16x4
+    planes spread over a box 1.5 times too wide lose 1-2 dB."""
     from .fit import fit
     from .object_carve import object_cells
     t0 = time.perf_counter()

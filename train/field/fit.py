@@ -113,16 +113,16 @@ def new_state(posed: PosedImages, cfg: FitConfig, init_planes: torch.Tensor | No
                                                     posed.c2w[tr], posed.intrinsics[tr], posed.height, posed.width))
     return FitState(planes, occ, frame, bank.to(device), opt,
                     channel=new_state_channel(cfg, device), background=bg, bg_opt=bg_opt, poses=poses,
-                    pose_opt=pose_opt, ground=_ground_rays(posed, cfg, bg is not None))
+                    pose_opt=pose_opt, ground=_ground_rays(posed, cfg, bg is not None, device))
 
 
-def _ground_rays(posed: PosedImages, cfg: FitConfig, outer: bool):
-    """`seen_ground.ground_rays` of posed, where cfg.seen_ground_weight and the background model ask for them and
-    the sparse box found them, else None."""
+def _ground_rays(posed: PosedImages, cfg: FitConfig, outer: bool, device):
+    """`seen_ground.ground_rays` of posed (its spared cells on `device`), where cfg.seen_ground_weight and the
+    background model ask for them and the sparse box found them, else None."""
     if not outer or cfg.seen_ground_weight <= 0:
         return None
     from .seen_ground import ground_rays
-    return ground_rays(posed.info, posed.height, posed.width, cfg.seen_ground_spare)
+    return ground_rays(posed.info, posed.height, posed.width, cfg.seen_ground_spare, device)
 
 
 def new_state_channel(cfg: FitConfig, device=None) -> tuple | None:

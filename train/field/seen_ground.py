@@ -25,14 +25,15 @@ __all__ = ["GroundRays", "Spared", "ground_rays", "clear_opacity"]
 
 @dataclass(frozen=True)
 class Spared:
-    """cells (G, G, G) bool [ix, iy, iz] over world `box` (2, 3): where the penalty counts no sample."""
+    """cells (G, G, G) bool [ix, iy, iz] over world `box` (2, 3): where the penalty counts no sample. Both on the
+    device of the points `holds` is asked about (`ground_rays` puts them there once)."""
 
     cells: Tensor
     box: Tensor
 
     def holds(self, world: Tensor) -> Tensor:
         """world points (M, 3) -> (M,) bool, those in a set cell (none outside the box)."""
-        cells, box = self.cells.to(world.device), self.box.to(world.device)
+        cells, box = self.cells, self.box
         g = torch.tensor(cells.shape, device=world.device)
         idx = torch.floor((world - box[0]) / (box[1] - box[0]) * g).long()
         inside = ((idx >= 0) & (idx < g)).all(dim=1)
@@ -51,19 +52,19 @@ class GroundRays:
     spared: Spared | None = None
 
 
-def ground_rays(info: dict, height: int, width: int, spare: bool = False) -> GroundRays | None:
+def ground_rays(info: dict, height: int, width: int, spare: bool = False, device=None) -> GroundRays | None:
     """posed.info's "ground_pixels" (K, 3) (train frame, row, col), "ground_plane" and "ground_clear" (the sparse
     box's) -> their rays as indices into the fit's ray bank (`rays.make_rays` of the training views, row-major), or
     None when there are none; with `spare`, and "object_cells" over "object_cells_box" in info (`object_box`'s),
-    the cells the penalty spares."""
+    the cells the penalty spares, on `device` (None: the CPU), where the fit's samples are."""
     seen = info.get("ground_pixels")
     if seen is None or not len(seen) or info.get("ground_plane") is None:
         return None
     frame, row, col = (torch.from_numpy(np.asarray(seen, np.int64)[:, k]) for k in range(3))
     cells, spared = info.get("object_cells") if spare else None, None
     if cells is not None and np.any(cells):
-        spared = Spared(torch.from_numpy(np.asarray(cells, bool)),
-                        torch.from_numpy(np.asarray(info["object_cells_box"], np.float32)))
+        spared = Spared(torch.from_numpy(np.asarray(cells, bool)).to(device),
+                        torch.from_numpy(np.asarray(info["object_cells_box"], np.float32)).to(device))
     return GroundRays((frame * height + row) * width + col, tuple(float(v) for v in info["ground_plane"]),
                       float(info["ground_clear"]), spared)
 
