@@ -24,6 +24,9 @@ OUTSIDE = 0.02    # at most 2% of the opacity outside the true mask + 2 px
 # score_object's object_{part}_psnr where the rows carry them (since 2026-12-07): the object's pixels along its
 # outline and inside it, and the same three against the object alone over white (clean)
 _PARTS = ("ring", "inner", "clean", "clean_ring", "clean_inner")
+# score_object's edge_split where the rows carry them (since 2026-12-07, later): the opacity just outside the true mask
+# where the ground near the object lies behind it and elsewhere, and the near ground's share of it
+_EDGES = ("edge_opacity_near", "edge_opacity_far", "edge_near_share")
 # the modes that differ from `outer` by --seen-ground-weight alone: one setting each, by the weight
 _WEIGHT_ONLY = ("outer", "outer-noseen", "outer-seen", "outer-seen-03", "outer-seen-1")
 
@@ -68,7 +71,7 @@ def fit_rows(paths: list[Path]) -> list[dict]:
             seen.add((key, setting[0], str(setting[1]), fit_seed))
             fits.append({"key": key, "variant": setting[0], "weight": setting[1], "fit_seed": fit_seed,
                          "object_psnr": row["object_psnr"], "outside": row["opacity_outside_2px"],
-                         **{k: row.get(f"object_{k}_psnr") for k in _PARTS}})
+                         **{k: row.get(f"object_{k}_psnr") for k in _PARTS}, **{k: row.get(k) for k in _EDGES}})
     return fits
 
 
@@ -97,7 +100,7 @@ def summary_rows(fits: list[dict]) -> list[dict]:
                          "outside": round(outside, 4), "within_outside": bool(outside <= OUTSIDE),
                          "object_psnr_fits": ";".join(f"{f['object_psnr']:.2f}" for f in mine),
                          "outside_fits": ";".join(f"{f['outside']:.4f}" for f in mine),
-                         **_parts(mine, masked)})
+                         **_parts(mine, masked), **_edges(mine, masked)})
     return rows
 
 
@@ -108,6 +111,13 @@ def _parts(mine: list[dict], masked: list[dict]) -> dict:
     gap = None if None in (out["clean_psnr"], out["clean_masked_psnr"]) else out["clean_psnr"] - out["clean_masked_psnr"]
     return {**{k: _rounded(v) for k, v in out.items()}, "clean_gap_db": _rounded(gap),
             "within_clean_gap": None if gap is None else bool(gap >= GAP_DB)}
+
+
+def _edges(mine: list[dict], masked: list[dict]) -> dict:
+    """The _EDGES medians of the fits `mine` and of the masked bound ({key}, {key}_masked), rounded to 1e-3; None
+    where the fits do not carry them."""
+    return {f"{k}{m}": None if (v := _median(fs, k)) is None else round(v, 3)
+            for k in _EDGES for m, fs in (("", mine), ("_masked", masked))}
 
 
 def _median(fits: list[dict], key: str) -> float | None:
@@ -188,6 +198,8 @@ def bench_capture_summary_command(args) -> int:
             gap += f" (outline {r['ring_psnr']:.2f}, inside {r['inner_psnr']:.2f})"
         if r["clean_gap_db"] is not None:
             gap += f", on white {r['clean_psnr']:.2f} dB, gap {r['clean_gap_db']:+.2f}"
+        if r["edge_opacity_near"] is not None:
+            gap += f", edge opacity over the near ground {r['edge_opacity_near']:.3f} / elsewhere {r['edge_opacity_far']:.3f}"
         print(f"{r['mesh']} seed {r['capture_seed']} {r['arc_deg']:g}° weight "
               f"{_label(r['variant'], r['seen_ground_weight'])}: "
               f"{r['object_psnr']:.2f} dB{gap}, {100 * r['outside']:.2f}% outside ({r['fits']} "

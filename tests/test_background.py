@@ -368,6 +368,8 @@ def test_a_bench_row_says_how_far_the_poses_lie_from_the_truth(capture):
     # scored against the object alone over white too (gt/transforms_white.json): the inside is the same pixels
     assert abs(row["object_clean_inner_psnr"] - row["object_inner_psnr"]) < 0.05, row
     assert row["object_clean_psnr"] > 12 and row["object_clean_ring_psnr"] != row["object_ring_psnr"], row
+    # the opacity just outside the outline, by what lies behind it (the capture's cameras look down at the ground)
+    assert all(0 <= row[k] <= 1 for k in ("edge_opacity_near", "edge_opacity_far", "edge_near_share")), row
 
 
 def test_the_outline_split_counts_the_ring_and_the_inside_apart():
@@ -390,6 +392,36 @@ def test_the_outline_split_counts_the_ring_and_the_inside_apart():
     s = outline_split(rgb, acc, gt, mask)
     assert s["object_ring_psnr"] == 100.0
     assert s["object_inner_psnr"] == pytest.approx(-10 * np.log10(0.04 * 4 / 256), rel=1e-6, abs=1e-3)
+
+
+def test_the_edge_split_tells_the_ground_near_the_object_from_the_rest():
+    """A camera 1 over the ground z = 0 at y = -5, looking level along +y: the rows under the horizon see the ground,
+    those over it the room; with a footprint, only the rays that meet the ground inside it count (the bottom rows
+    meet it nearest the camera). A 20x20 object in the middle of a 40x40 view with opacity 0.5 on the column just
+    left of it and 0.25 on the row just under it: the near side holds the row under it and the column's lower half."""
+    from snapshot3d.cameras import look_at
+    from snapshot3d.train.field.object_score import _edges, edge_split, ground_pixels
+    c2w = look_at(np.array([0.0, -5.0, 1.0]), np.array([0.0, 0.0, 1.0]))
+    intr = (40.0, 40.0, 20.0, 20.0)
+    ground = ground_pixels(c2w, intr, 40, 40, 0.0)
+    assert ground[20:].all() and not ground[:20].any()
+    assert not ground_pixels(c2w, intr, 40, 40, 2.0).any()   # the camera under the plane
+    # row v meets the ground at y = -5 + 40 / (v + 0.5 - 20): row 39 at -2.95, row 24 at +3.89
+    near = ground_pixels(c2w, intr, 40, 40, 0.0, np.array([[-10.0, -3.0], [10.0, 3.0]]))
+    ys = -5 + 40 / (np.arange(40) + 0.5 - 20)
+    assert np.array_equal(near[:, 20], (np.arange(40) >= 20) & (np.abs(ys) <= 3))
+    mask = np.zeros((40, 40), bool)
+    mask[10:30, 10:30] = True
+    acc = mask.astype(np.float32)
+    acc[10:30, 9] = 0.5
+    acc[30, 10:30] = 0.25
+    e = edge_split(acc, mask, ground)
+    assert e["edge_near_n"] + e["edge_far_n"] == 4 * 20 + 4   # the ring of 8-neighbours, corners included
+    assert e["edge_near_n"] == 2 * 11 + 20 and e["edge_far_n"] == 2 * 11 + 20   # rows 20-30 / 9-19 of the columns
+    assert e["edge_near_sum"] == pytest.approx(10 * 0.5 + 20 * 0.25) and e["edge_far_sum"] == pytest.approx(5.0)
+    out = _edges([e, e])
+    assert out["edge_opacity_near"] == pytest.approx(10.0 / 42) and out["edge_opacity_far"] == pytest.approx(5.0 / 42)
+    assert out["edge_near_share"] == pytest.approx(10.0 / 15.0)
 
 
 def test_the_object_alone_scores_below_perfect_only_along_its_outline(capture):

@@ -95,3 +95,21 @@ def test_the_gap_against_the_object_over_white_is_counted_apart(tmp_path):
     assert row["clean_gap_db"] == _near(-1.5) and row["within_clean_gap"] and row["within_outside"]
     assert _totals([row])["0.3"] == {"captures": 1, "within_gap": 0, "within_outside": 1, "both": 0,
                                      "clean_captures": 1, "within_clean_gap": 1, "both_clean": 1, "median_fits": 2.0}
+
+
+def test_the_edge_opacity_by_what_lies_behind_is_a_median_beside_the_bound(tmp_path):
+    """Fits that carry score_object's edge split get its medians, and the masked fits' beside them; rows without it
+    get None."""
+    from snapshot3d.bench.capture_summary import fit_rows, summary_rows
+    edge = {"masked": (0.1, 0.05, 0.6), 10: (0.4, 0.2, 0.7), 11: (0.3, 0.1, 0.9), 12: (0.2, 0.3, 0.5)}
+    rows = [_row("masked", 0, 24.0, 0.0, **dict(zip(("edge_opacity_near", "edge_opacity_far",
+                                                     "edge_near_share"), edge["masked"])))]
+    rows += [_row("outer", s, 22.0, 0.01, 0.3, **dict(zip(("edge_opacity_near", "edge_opacity_far",
+                                                          "edge_near_share"), edge[s]))) for s in (10, 11, 12)]
+    rows.append(_row("outer", 1, 22.0, 0.01, 0.0))   # another setting, written before the split
+    summary = {r["seen_ground_weight"]: r for r in summary_rows(fit_rows([_file(tmp_path / "e.json", 0, 120.0, rows)]))}
+    row = summary[0.3]
+    assert row["edge_opacity_near"] == _near(0.3) and row["edge_opacity_far"] == _near(0.2)
+    assert row["edge_near_share"] == _near(0.7)
+    assert row["edge_opacity_near_masked"] == _near(0.1) and row["edge_opacity_far_masked"] == _near(0.05)
+    assert summary[0.0]["edge_opacity_near"] is None and summary[0.0]["edge_opacity_near_masked"] == _near(0.1)

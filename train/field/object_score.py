@@ -13,9 +13,10 @@ from .field import decode, sample_planes
 from .render import occupancy_from_planes, render_pixels, render_rays
 from .sampler import BoxFrame
 
-__all__ = ["score_object", "outline_split", "clean_ceiling", "density_share_outside_box"]
+__all__ = ["score_object", "outline_split", "edge_split", "ground_pixels", "clean_ceiling", "density_share_outside_box"]
 
 RING_PX = 2   # the outline's ring: the true mask's pixels within this many pixels of its edge
+NEAR_GROUND = 2.0   # the ground near the object: its footprint (the true box's) this many times as wide about its centre
 
 
 def _psnr(err: np.ndarray) -> float:
@@ -32,6 +33,36 @@ def outline_split(rgb: np.ndarray, acc: np.ndarray, gt: np.ndarray, mask: np.nda
     err = (rgb - gt) ** 2
     return {"object_ring_psnr": _psnr(err[mask & ~inner]), "object_inner_psnr": _psnr(err[inner]),
             "object_coverage": float(acc[mask].mean()) if mask.any() else 1.0}
+
+
+def ground_pixels(c2w: np.ndarray, intrinsics, width: int, height: int, ground_z: float,
+                  footprint: np.ndarray | None = None) -> np.ndarray:
+    """One camera c2w (4, 4) OpenGL, intrinsics (fx, fy, cx, cy) pixels (centres at +0.5), in a z-up world whose
+    ground is the plane z = ground_z -> (H, W) bool: the pixels whose ray descends to that plane in front of the
+    camera, and with `footprint` (2, 2) [[x0, y0], [x1, y1]] meets it inside that rectangle."""
+    from snapshot3d.cameras import pixel_rays
+
+    o, d = (a.astype(np.float64) for a in pixel_rays(np.asarray(c2w, np.float64), *(float(v) for v in intrinsics),
+                                                    width, height))
+    down = (d[:, 2] < -1e-9) & (o[:, 2] > ground_z)
+    if footprint is not None:
+        t = np.where(down, (ground_z - o[:, 2]) / np.where(down, d[:, 2], -1.0), 0.0)
+        q = o[:, :2] + t[:, None] * d[:, :2]
+        down &= np.all((q >= footprint[0]) & (q <= footprint[1]), axis=1)
+    return down.reshape(height, width)
+
+
+def edge_split(acc: np.ndarray, mask: np.ndarray, near: np.ndarray) -> dict:
+    """One view: acc (H, W) the planes' opacity, mask (H, W) bool the object's true mask, near (H, W) bool the
+    pixels behind which lies the ground near the object (`ground_pixels` with a footprint) -> the pixels just
+    outside the mask (its 8-neighbours), split by what lies behind them: edge_near_n, edge_far_n (counts: the
+    ground near the object; the ground farther off, or the room), edge_near_sum, edge_far_sum (the planes' opacity
+    summed over them). The mask keeps the pixels the object covers at least half of, so a fit whose outline is as
+    sharp as the object's has little opacity there; a fat edge shows which side it grows into."""
+    ring = (cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) & ~mask
+    on, off = ring & near, ring & ~near
+    return {"edge_near_n": int(on.sum()), "edge_far_n": int(off.sum()),
+            "edge_near_sum": float(acc[on].sum()), "edge_far_sum": float(acc[off].sum())}
 
 
 def clean_ceiling(truth: PosedImages, clean: PosedImages, views=None) -> dict:
@@ -74,6 +105,10 @@ def score_object(planes: torch.Tensor, decoder, box, truth: PosedImages, true_bo
     opacity_outside: share of the planes' opacity summed over the views' pixels that falls outside the mask;
     opacity_outside_2px: the same outside the mask grown by 2 pixels (edges and the mask's own rounding forgiven);
     object_ring_psnr, object_inner_psnr, object_coverage: `outline_split`'s, mean over views;
+    edge_opacity_near, edge_opacity_far: the planes' mean opacity on the pixels just outside the true mask whose
+    ray meets the ground (the plane of true_box's floor) near the object (within NEAR_GROUND times its footprint,
+    where its shadow and a fit's floor band lie) and on the others (`edge_split`, pooled over views), and
+    edge_near_share: the near ground's share of that opacity summed;
     density_outside_box: `density_share_outside_box` against `true_box`;
     with `clean` (the object alone over white at the same frames, make-capture's gt/transforms_white.json):
     object_clean_psnr, object_clean_ring_psnr, object_clean_inner_psnr, the same in the same masks against it
@@ -86,7 +121,10 @@ def score_object(planes: torch.Tensor, decoder, box, truth: PosedImages, true_bo
     views = np.asarray(views)
     rgbs, accs = render_pixels(lambda o, d: render_rays(planes, decoder, frame, occ, o, d)[:2], frame, truth.c2w[views],
                                truth.intrinsics[views], truth.width, truth.height, chunk)
-    obj, white, split, acc_in, acc_near, acc_all = [], [], [], 0.0, 0.0, 0.0
+    obj, white, split, edges, acc_in, acc_near, acc_all = [], [], [], [], 0.0, 0.0, 0.0
+    tb = np.asarray(true_box, np.float64)
+    centre, half = tb[:, :2].mean(0), NEAR_GROUND * (tb[1, :2] - tb[0, :2]) / 2
+    footprint = np.stack([centre - half, centre + half])
     for i, rgb, acc in zip(views, rgbs, accs):
         mask, gt = truth.alpha[i] >= 0.5, truth.images[i]
         err = (rgb - gt) ** 2
@@ -98,11 +136,23 @@ def score_object(planes: torch.Tensor, decoder, box, truth: PosedImages, true_bo
             split[-1].update({"object_clean_psnr": _psnr(((rgb - clean.images[i]) ** 2)[mask]),
                               "object_clean_ring_psnr": on_white["object_ring_psnr"],
                               "object_clean_inner_psnr": on_white["object_inner_psnr"]})
+        edges.append(edge_split(acc, mask, ground_pixels(truth.c2w[i], truth.intrinsics[i], truth.width, truth.height,
+                                                         float(tb[0, 2]), footprint)))
         near = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         acc_in, acc_near, acc_all = acc_in + float(acc[mask].sum()), acc_near + float(acc[near].sum()), \
             acc_all + float(acc.sum())
     return {"object_psnr": float(np.mean(obj)), "white_psnr": float(np.mean(white)),
             "opacity_outside": float(1 - acc_in / max(acc_all, 1e-12)),
             "opacity_outside_2px": float(1 - acc_near / max(acc_all, 1e-12)),
-            **{k: float(np.mean([v[k] for v in split])) for k in split[0]},
+            **{k: float(np.mean([v[k] for v in split])) for k in split[0]}, **_edges(edges),
             "density_outside_box": density_share_outside_box(planes, decoder, box, true_box)}
+
+
+def _edges(views: list[dict]) -> dict:
+    """`edge_split`s of several views -> edge_opacity_near, edge_opacity_far (mean opacity, pooled; 0 where a side
+    has no pixel) and edge_near_share (the near ground's share of the opacity summed on both)."""
+    tot = {k: sum(v[k] for v in views) for k in views[0]}
+    both = tot["edge_near_sum"] + tot["edge_far_sum"]
+    return {"edge_opacity_near": tot["edge_near_sum"] / max(tot["edge_near_n"], 1),
+            "edge_opacity_far": tot["edge_far_sum"] / max(tot["edge_far_n"], 1),
+            "edge_near_share": tot["edge_near_sum"] / both if both > 0 else 0.0}
