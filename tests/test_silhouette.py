@@ -39,6 +39,20 @@ def test_the_cut_keeps_the_body_and_its_legs_and_drops_the_ground_between_them()
     assert not mask[:10].any(), "the ground far from the planes is not the object"
 
 
+def test_a_cut_not_grown_lies_inside_the_grown_one_by_the_grow():
+    """The same photo cut with grow=0 and the default grow (GROW of the longer side, 2 px at 128): the grown mask is
+    the tight one dilated by 2 px, so it holds it, and holds no pixel farther than 2 px from it."""
+    h, w = 96, 128
+    photo = _ground(h, w)
+    body = np.zeros((h, w), bool)
+    body[20:60, 40:90] = True
+    photo[body] = (0.92, 0.9, 0.88)
+    cover = body.astype(np.float32)[None]
+    (tight,), (grown,) = photo_silhouettes(photo[None], cover, grow=0), photo_silhouettes(photo[None], cover)
+    assert tight[body].mean() > 0.99 and (tight & ~body).mean() < 0.01
+    assert np.array_equal(grown, cv2.dilate(tight.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
+
+
 def test_a_view_with_nothing_opaque_or_nothing_shown_has_no_silhouette():
     photo = _ground(32, 32)[None]
     assert photo_silhouettes(photo, np.zeros((1, 32, 32), np.float32)) == [None]
@@ -76,7 +90,8 @@ def test_the_object_alone_step_cuts_a_skirt_under_the_belly_the_photos_do_not_sh
     fin beside the body over the band; the photos show the body and legs alone over a textured ground. With
     --object-silhouette 0.2 the skirt's cells are cut and the body's and legs' kept; the fin, over the band, stays
     (there the object's thin parts are not left to the photos' cuts); with 1 (off) all stay. Where the photos show
-    nothing of the planes, nothing is cut."""
+    nothing of the planes, nothing is cut. With --object-halo 0.2 too, the solid cells all stay and most of what
+    growing added round the fin, which no photo shows, is cut."""
     from dataclasses import replace
 
     from snapshot3d.posed import PosedImages
@@ -113,6 +128,18 @@ def test_the_object_alone_step_cuts_a_skirt_under_the_belly_the_photos_do_not_sh
     assert kept[at_skirt].float().mean() > 0.9 and kept[at_fin].float().mean() > 0.9, "not solid before the cut"
     assert cut[at_skirt].float().mean() < 0.2, cut[at_skirt].float().mean()   # measured 0.09
     assert cut[at_body].all() and cut[at_legs].all() and torch.equal(cut[at_fin], kept[at_fin])
+    # --object-halo: what growing added round the fin, which no photo shows, is cut; the solid cells all stay
+    from snapshot3d.formats import OCC_RES
+    from snapshot3d.train.field.object_carve import object_cells
+    from snapshot3d.train.field.render import cell_alpha
+    _, haloed = object_views(planes, decoder, posed, silhouette=0.2, halo=0.2)
+    core = torch.from_numpy(object_cells(*cell_alpha(planes, decoder, box, OCC_RES, with_rgb=True), near=0))
+    assert not (haloed & ~cut).any() and not (cut & core & ~haloed).any()
+    assert haloed[at_body].all() and haloed[at_legs].all() and haloed[at_fin].float().mean() > 0.5
+    round_fin = torch.zeros_like(cut)
+    round_fin[51:62, 27:37, 12:32] = True   # past the body's own growth
+    round_fin &= ~fin
+    assert (haloed & round_fin).sum() < 0.5 * (cut & round_fin).sum()   # measured 271 of 1602
     # photos of the ground alone: every cut fails (keeps less than half the opaque pixels), and no view votes
     _, none_seen = object_views(planes, decoder, replace(posed, images=ground.astype(np.float32)), silhouette=0.2)
     assert torch.equal(none_seen, kept)
@@ -148,3 +175,28 @@ def test_the_band_vote_cuts_a_skirt_and_keeps_back_a_broad_base_the_photos_hold(
 def test_the_base_keep_option_is_checked():
     with pytest.raises(UserError, match="--object-base-keep must be in"):
         check_fit_config(FitConfig(object_base_keep=1.5))
+
+
+def test_the_halo_vote_cuts_only_what_growing_added():
+    """A core of cells and what growing added round it: an added cell outside the silhouettes in 30% of its views is
+    cut at any height, one outside in 10% stays, and a core cell stays however often the photos miss it (a dark
+    hoof that GrabCut gives to its shadow); cells that were not the object's stay out."""
+    from snapshot3d.train.field.object_carve import halo_vote
+
+    core = np.zeros((5, 5, 5), bool)
+    core[2, 2, :] = True
+    cells = core.copy()
+    cells[1, 2, :] = cells[3, 2, :] = True            # what growing added
+    outside = np.zeros((5, 5, 5))
+    outside[1, 2, :] = 0.3                            # a halo the photos do not hold, at every height
+    outside[3, 2, :] = 0.1
+    outside[2, 2, 0] = 0.9                            # a core cell the photos' cut misses
+    outside[0, 0, 0] = 0.0                            # not the object's: stays out
+    got = halo_vote(cells, core, outside, 0.2)
+    assert not got[1, 2].any() and got[3, 2].all() and got[2, 2].all() and not got[0, 0, 0]
+    assert np.array_equal(halo_vote(cells, core, outside, 1.0), cells)
+
+
+def test_the_halo_option_is_checked():
+    with pytest.raises(UserError, match="--object-halo must be in"):
+        check_fit_config(FitConfig(object_halo=-0.1))

@@ -140,6 +140,10 @@ class FitConfig:
                                            "its rule drops (nothing standing over them: a broad base on the "
                                            "ground) are kept when they fall outside the photos' silhouettes in "
                                            "fewer than this share of the views that see them; 0: off")
+    object_halo: float = config_field(1.0, "with --object-silhouette under 1: the cells that growing the object's "
+                                      "cells adds (a halo the fit paints round its outline) are cut where they fall "
+                                      "outside the photos' silhouettes, not grown, in more than this share of the "
+                                      "views that see them, at every height; 1: off")
 
 
 @dataclass
@@ -189,6 +193,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("object-box", 0 <= cfg.object_box <= 1, "in [0, 1]"),
         ("object-silhouette", 0 <= cfg.object_silhouette <= 1, "in [0, 1]"),
         ("object-base-keep", 0 <= cfg.object_base_keep <= 1, "in [0, 1]"),
+        ("object-halo", 0 <= cfg.object_halo <= 1, "in [0, 1]"),
         ("wall-margin", 0 < cfg.wall_margin <= 0.25, "in (0, 0.25]"),
     ]
 

@@ -32,7 +32,7 @@ import numpy as np
 from snapshot3d import formats
 from snapshot3d.posed import PosedImages
 
-__all__ = ["object_cells", "object_views", "band_vote", "object_config", "photo_colours", "refined_c2w",
+__all__ = ["object_cells", "object_views", "band_vote", "halo_vote", "object_config", "photo_colours", "refined_c2w",
            "PHOTO_RAMP", "SOLID", "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
            "TEACHER_SIZE", "DISTIL_LR", "STEP_DOWN", "KNN", "GROUND_LAYERS",
            "FOOTPRINT", "SEPARATE"]
@@ -154,7 +154,7 @@ def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray
 
 
 def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None, silhouette: float = 1.0,
-                 base_keep: float = 0.0):
+                 base_keep: float = 0.0, halo: float = 1.0):
     """planes (3, C, R, R) torch, fitted with the background model over posed.box; poses: the fit's pose corrections
     (V, 6) of posed.train, or None -> (the views to fit the object alone to: posed's training views at those poses,
     rendered with the object's cells only over white, at most TEACHER_SIZE pixels on the longer side, their colour
@@ -162,7 +162,9 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     their hull), or None when no cell is solid. With `silhouette` under 1, the object's cells that fall outside the
     photos' silhouettes in more than that share of the views (`silhouette.py`) are cut first, in the floor band; and
     with `base_keep` over 0, the floor band's solid cells that its rule drops are kept where they fall outside the
-    silhouettes in fewer than that share of the views (a broad base: the bunny's)."""
+    silhouettes in fewer than that share of the views (a broad base: the bunny's); with `halo` under 1, the cells
+    that growing the object's cells added are cut, at every height, where they fall outside the silhouettes not
+    grown in more than that share of the views (`halo_vote`)."""
     import cv2
     import torch
 
@@ -187,8 +189,9 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
         np.stack([cv2.resize(p, (w, h), interpolation=cv2.INTER_AREA) for p in posed.images[tr]])
     if silhouette < 1:
         loose = object_cells(alpha, rgb, floor_band=0.0) if base_keep > 0 else None
-        cells = _by_silhouettes(cells, loose, photos, np.clip(cover, 0.0, 1.0), c2w, intrinsics, box, silhouette,
-                                base_keep)
+        core = object_cells(alpha, rgb, near=0) if halo < 1 else None
+        cells = _by_silhouettes(cells, loose, core, photos, np.clip(cover, 0.0, 1.0), c2w, intrinsics, box,
+                                (silhouette, base_keep, halo))
         keep = torch.from_numpy(cells).to(keep.device)
         views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     cover = np.clip(cover, 0.0, 1.0)
@@ -197,25 +200,44 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
                        name=posed.name), keep
 
 
-def _by_silhouettes(cells, loose, photos, cover, c2w, intrinsics, box, share: float, base_keep: float):
+def _by_silhouettes(cells, loose, core, photos, cover, c2w, intrinsics, box, shares: tuple) -> np.ndarray:
     """The object's cells (G, G, G) bool after the photos' silhouettes (GrabCut started from the views' opacity
-    `cover`): over the floor band as they are; in it, those that fall outside the silhouettes in at most `share` of
-    the views that see them, and those of `loose` (the cells without the band's rule, or None) that fall outside in
-    fewer than `base_keep` of them. The band is where the ground's shadow is painted; over it, what the cut misses is
-    the object's own (a grey teapot's spout and handle on a grey ground, spot's horns: -3.1 and -1.2 dB when cut at
-    every height). A base that meets the ground along its whole outline (the bunny's) stands on no solid cell over
-    the band's top, so the band's rule drops it; the photos hold it in nearly every view, where a shadow under a
-    belly falls outside the cut in side views."""
+    `cover`), shares = (share, base_keep, halo): over the floor band as they are; in it, those that fall outside the
+    silhouettes in at most `share` of the views that see them, and those of `loose` (the cells without the band's
+    rule, or None) that fall outside in fewer than `base_keep` of them. The band is where the ground's shadow is
+    painted; over it, what the cut misses is the object's own (a grey teapot's spout and handle on a grey ground,
+    spot's horns: -3.1 and -1.2 dB when cut at every height). A base that meets the ground along its whole outline
+    (the bunny's) stands on no solid cell over the band's top, so the band's rule drops it; the photos hold it in
+    nearly every view, where a shadow under a belly falls outside the cut in side views. With `core` (the cells
+    before growing, or None) and `halo` under 1, `halo_vote` at every height, against the silhouettes not grown."""
+    import cv2
+
     from snapshot3d.carve import grid_centres
 
-    from .silhouette import outside_share, photo_silhouettes
+    from .silhouette import GROW, outside_share, photo_silhouettes
 
+    share, base_keep, halo = shares
     g = formats.OCC_RES
     band = math.ceil(FLOOR_BAND * g)
-    masks = photo_silhouettes(photos, cover)
-    centres = grid_centres(np.asarray(box, np.float64), g)[:, :, :band].reshape(-1, 3)
-    return band_vote(cells, loose, outside_share(centres, c2w, intrinsics, masks).reshape(g, g, band), share,
-                     base_keep)
+    tight = photo_silhouettes(photos, cover, grow=0)
+    r = max(1, round(GROW * max(photos.shape[1:3])))
+    kernel = np.ones((2 * r + 1,) * 2, np.uint8)
+    masks = [None if m is None else cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in tight]
+    centres = grid_centres(np.asarray(box, np.float64), g)
+    out = band_vote(cells, loose, outside_share(centres[:, :, :band].reshape(-1, 3), c2w, intrinsics,
+                                                masks).reshape(g, g, band), share, base_keep)
+    if core is None or halo >= 1:
+        return out
+    return halo_vote(out, core, outside_share(centres.reshape(-1, 3), c2w, intrinsics, tight).reshape(g, g, g), halo)
+
+
+def halo_vote(cells: np.ndarray, core: np.ndarray, outside: np.ndarray, share: float) -> np.ndarray:
+    """cells (G, G, G) bool, the object's (grown), core (G, G, G) bool the same before growing, outside (G, G, G) the
+    share of the views that see each cell in which it falls outside the photos' silhouettes (not grown) -> (G, G, G)
+    bool: the core's cells as they are, the cells growing added where they are outside in at most `share` of their
+    views. Growing keeps thin parts that are not solid (a spout, a knob), which the photos show; it also keeps the
+    haze the fit paints round the outline, against the room's detail behind it, which they do not."""
+    return cells & (core | (outside <= share))
 
 
 def band_vote(cells: np.ndarray, loose: np.ndarray | None, outside: np.ndarray, share: float,

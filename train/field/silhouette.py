@@ -23,15 +23,16 @@ FAILED = 0.5       # a cut that keeps less than this share of the opaque pixels 
 #                    the planes do: a grey teapot's view, 0.22; the others 0.91 to 1), and its view does not vote
 
 
-def photo_silhouettes(photos: np.ndarray, cover: np.ndarray) -> list:
+def photo_silhouettes(photos: np.ndarray, cover: np.ndarray, grow: int | None = None) -> list:
     """photos (N, H, W, 3) RGB in [0, 1], cover (N, H, W) the planes' opacity in the same views -> N masks (H, W) bool
-    of the object as GrabCut cuts each photo, grown by GROW of the longer side; None for a view that holds no
-    opaque pixel or no background to learn from, or whose cut keeps less than FAILED of its opaque pixels."""
+    of the object as GrabCut cuts each photo, grown by `grow` pixels (None: GROW of the longer side, at least 1);
+    None for a view that holds no opaque pixel or no background to learn from, or whose cut keeps less than FAILED
+    of its opaque pixels."""
     import cv2
 
     h, w = cover.shape[1:]
     longer = max(h, w)
-    grow, band = max(1, round(GROW * longer)), max(1, round(BAND * longer))
+    grow, band = max(1, round(GROW * longer)) if grow is None else grow, max(1, round(BAND * longer))
     near_kernel, grow_kernel = np.ones((2 * band + 1,) * 2, np.uint8), np.ones((2 * grow + 1,) * 2, np.uint8)
     out = []
     for photo, acc in zip(photos, cover):
@@ -46,7 +47,8 @@ def photo_silhouettes(photos: np.ndarray, cover: np.ndarray) -> list:
         cv2.grabCut(bgr, init, None, np.zeros((1, 65)), np.zeros((1, 65)), ITERATIONS, cv2.GC_INIT_WITH_MASK)
         opaque = acc > OPAQUE
         cut = (init == cv2.GC_FGD) | (init == cv2.GC_PR_FGD)
-        out.append(cv2.dilate(cut.astype(np.uint8), grow_kernel) > 0 if cut[opaque].mean() >= FAILED else None)
+        grown = cv2.dilate(cut.astype(np.uint8), grow_kernel) > 0 if grow > 0 else cut
+        out.append(grown if cut[opaque].mean() >= FAILED else None)
     return out
 
 
