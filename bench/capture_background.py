@@ -68,9 +68,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          # the ground's texture twice as wide (and as fine), the rays past the box's sides ending on it
          "outer-reach2": ("transforms.json", "outer", "auto", {"ground_reach": 2.0, "ground_texture": 256}),
          # the cells that growing the object's cells adds cut where the photos' silhouettes, not grown, do not hold
-         # them (--object-halo); and the same with the broad base's vote off
+         # them (--object-halo)
          "outer-halo": ("transforms.json", "outer", "auto", {"object_halo": 0.2}),
-         "outer-halo-nobasekeep": ("transforms.json", "outer", "auto", {"object_halo": 0.2, "object_base_keep": 0.0}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),

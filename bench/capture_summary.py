@@ -200,6 +200,8 @@ def bench_capture_summary_command(args) -> int:
             gap += f", on white {r['clean_psnr']:.2f} dB, gap {r['clean_gap_db']:+.2f}"
         if r["edge_opacity_near"] is not None:
             gap += f", edge opacity over the near ground {r['edge_opacity_near']:.3f} / elsewhere {r['edge_opacity_far']:.3f}"
+            if r["edge_opacity_near_masked"] is not None:
+                gap += f" (masked {r['edge_opacity_near_masked']:.3f} / {r['edge_opacity_far_masked']:.3f})"
         print(f"{r['mesh']} seed {r['capture_seed']} {r['arc_deg']:g}° weight "
               f"{_label(r['variant'], r['seen_ground_weight'])}: "
               f"{r['object_psnr']:.2f} dB{gap}, {100 * r['outside']:.2f}% outside ({r['fits']} "
