@@ -143,7 +143,8 @@ class FitConfig:
     object_halo: float = config_field(1.0, "with --object-silhouette under 1: the cells that growing the object's "
                                       "cells adds (a halo the fit paints round its outline) are cut where they fall "
                                       "outside the photos' silhouettes, not grown, in more than this share of the "
-                                      "views that see them, at every height; 1: off")
+                                      "views that see them, at every height (measured: it cuts the object's skin "
+                                      "too, docs/capture.md); 1: off")
 
 
 @dataclass

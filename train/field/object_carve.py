@@ -235,8 +235,9 @@ def halo_vote(cells: np.ndarray, core: np.ndarray, outside: np.ndarray, share: f
     """cells (G, G, G) bool, the object's (grown), core (G, G, G) bool the same before growing, outside (G, G, G) the
     share of the views that see each cell in which it falls outside the photos' silhouettes (not grown) -> (G, G, G)
     bool: the core's cells as they are, the cells growing added where they are outside in at most `share` of their
-    views. Growing keeps thin parts that are not solid (a spout, a knob), which the photos show; it also keeps the
-    haze the fit paints round the outline, against the room's detail behind it, which they do not."""
+    views. Growing keeps thin parts that are not solid (a spout, a knob), which the photos show, and the haze the
+    fit paints round the outline, which they do not; on spot's and the teapot's arcs the vote also cut the object's
+    outer skin (-1.5 and -2.2 dB, docs/capture.md, "The edge that is too wide"), so fit --object-halo is off."""
     return cells & (core | (outside <= share))
 
 
