@@ -210,19 +210,15 @@ def _by_silhouettes(cells, loose, core, photos, cover, c2w, intrinsics, box, sha
     (the bunny's) stands on no solid cell over the band's top, so the band's rule drops it; the photos hold it in
     nearly every view, where a shadow under a belly falls outside the cut in side views. With `core` (the cells
     before growing, or None) and `halo` under 1, `halo_vote` at every height, against the silhouettes not grown."""
-    import cv2
-
     from snapshot3d.carve import grid_centres
 
-    from .silhouette import GROW, outside_share, photo_silhouettes
+    from .silhouette import grown, outside_share, photo_silhouettes
 
     share, base_keep, halo = shares
     g = formats.OCC_RES
     band = math.ceil(FLOOR_BAND * g)
     tight = photo_silhouettes(photos, cover, grow=0)
-    r = max(1, round(GROW * max(photos.shape[1:3])))
-    kernel = np.ones((2 * r + 1,) * 2, np.uint8)
-    masks = [None if m is None else cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in tight]
+    masks = grown(tight)
     centres = grid_centres(np.asarray(box, np.float64), g)
     out = band_vote(cells, loose, outside_share(centres[:, :, :band].reshape(-1, 3), c2w, intrinsics,
                                                 masks).reshape(g, g, band), share, base_keep)

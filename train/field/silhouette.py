@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["photo_silhouettes", "outside_share", "GROW", "BAND", "ITERATIONS", "OPAQUE", "TOUCHED", "FAILED"]
+__all__ = ["photo_silhouettes", "grown", "outside_share", "GROW", "BAND", "ITERATIONS", "OPAQUE", "TOUCHED", "FAILED"]
 
 GROW = 0.015       # of the view's longer side: the cut is grown by this before the cells are judged (2 px at 128;
 #                    3 px kept the contact shadow's ring round a duck's or a teapot's base, 1 px cut spot's hooves)
@@ -31,9 +31,8 @@ def photo_silhouettes(photos: np.ndarray, cover: np.ndarray, grow: int | None = 
     import cv2
 
     h, w = cover.shape[1:]
-    longer = max(h, w)
-    grow, band = max(1, round(GROW * longer)) if grow is None else grow, max(1, round(BAND * longer))
-    near_kernel, grow_kernel = np.ones((2 * band + 1,) * 2, np.uint8), np.ones((2 * grow + 1,) * 2, np.uint8)
+    band = max(1, round(BAND * max(h, w)))
+    near_kernel = np.ones((2 * band + 1,) * 2, np.uint8)
     out = []
     for photo, acc in zip(photos, cover):
         init = np.full(acc.shape, cv2.GC_BGD, np.uint8)
@@ -47,9 +46,23 @@ def photo_silhouettes(photos: np.ndarray, cover: np.ndarray, grow: int | None = 
         cv2.grabCut(bgr, init, None, np.zeros((1, 65)), np.zeros((1, 65)), ITERATIONS, cv2.GC_INIT_WITH_MASK)
         opaque = acc > OPAQUE
         cut = (init == cv2.GC_FGD) | (init == cv2.GC_PR_FGD)
-        grown = cv2.dilate(cut.astype(np.uint8), grow_kernel) > 0 if grow > 0 else cut
-        out.append(grown if cut[opaque].mean() >= FAILED else None)
-    return out
+        out.append(cut if cut[opaque].mean() >= FAILED else None)
+    return grown(out, grow)
+
+
+def grown(masks: list, grow: int | None = None) -> list:
+    """masks: (H, W) bool or None each -> the same dilated by `grow` pixels (None: GROW of the longer side, at least
+    1; 0: as they are); None stays None."""
+    import cv2
+
+    shape = next((m.shape for m in masks if m is not None), None)
+    if shape is None:
+        return list(masks)
+    grow = max(1, round(GROW * max(shape))) if grow is None else grow
+    if grow <= 0:
+        return list(masks)
+    kernel = np.ones((2 * grow + 1,) * 2, np.uint8)
+    return [None if m is None else cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in masks]
 
 
 def outside_share(points: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, masks: list) -> np.ndarray:
