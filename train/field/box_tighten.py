@@ -106,6 +106,8 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig,
         box, found, c2w = sparse_box(posed.images[t], posed.c2w[t], posed.intrinsics[t], posed.box,
                                      SparseBoxConfig(bundle=cfg.bundle in ("fit", "box")))
         info.update(found, sparse_seconds=round(time.perf_counter() - t0, 1))
+        if box is not None and cfg.ground_sweep and found.get("ground_pixels") is not None:
+            info.update(_swept(posed, c2w, found))
         if box is not None:
             if not cfg.tighten_sides:   # the floor alone
                 floor, box = box[0, 2], np.array(posed.box, np.float32)
@@ -117,6 +119,18 @@ def tighten_box(posed: PosedImages, decoder, cfg: FitConfig,
                          "prefit_seconds": 0.0}, (
                 c2w.astype(np.float32) if cfg.bundle == "fit" and found.get("bundle", {}).get("adjusted") else None)
     return (*_tightened_by_prefit(posed, decoder, cfg, looks_down, info, device), None)
+
+
+def _swept(posed: PosedImages, c2w: np.ndarray, found: dict) -> dict:
+    """The sparse box's ground pixels with those the ground plane's sweep finds (`snapshot3d.ground_sweep`, fit
+    --ground-sweep) -> info's ground_pixels (K, 3) (train frame, row, col) and ground_sweep_pixels (their count
+    the sweep found)."""
+    from snapshot3d.ground_sweep import ground_sweep
+
+    t = posed.train
+    dense = ground_sweep(posed.images[t], c2w, posed.intrinsics[t], found["ground_plane"], np.mean(posed.box, axis=0))
+    both = np.unique(np.concatenate([np.asarray(found["ground_pixels"], np.int64), dense]), axis=0)
+    return {"ground_pixels": both, "ground_sweep_pixels": int(len(dense))}
 
 
 def _tightened_by_prefit(posed: PosedImages, decoder, cfg: FitConfig, looks_down: bool, info: dict,

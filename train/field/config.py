@@ -92,6 +92,11 @@ class FitConfig:
                                              "empty (train/field/seen_ground.py); -1: auto, 0.3 where the training "
                                              "cameras span less than 300 deg round the object (a frontal arc: "
                                              "fewer floaters), else 0 (docs/capture.md; a fit's core treats -1 as 0)")
+    ground_sweep: bool = config_field(False, "with --seen-ground-weight: also count as showing the ground the "
+                                      "pixels whose patch agrees with the nearest views warped through the ground "
+                                      "plane and not through planes a little over it (snapshot3d/ground_sweep.py; "
+                                      "20-30% of a frontal arc's pixels, against about 1% from the matched "
+                                      "features)")
     seen_ground_spare: bool = config_field(False, "with --seen-ground-weight: the penalty skips the samples in the "
                                            "object's cells as the object-box fit found them (--object-box), so "
                                            "that rays passing close by the object do not wear its edge away (on "
