@@ -22,15 +22,14 @@ __all__ = ["SweepConfig", "plane_homography", "window_ncc", "ground_sweep"]
 
 @dataclass(frozen=True)
 class SweepConfig:
-    """How the ground is swept: neighbours: the training cameras each view is compared with, those whose angle
-    about the look-at point lies nearest angle_deg (near cameras see too little parallax between the ground and
-    the raised planes, far ones too different a view); best: how many
-    of them must agree (the object hides the ground from some); window: the correlation's window, pixels; agree: the
-    correlation the best neighbours reach at the ground; margin: by how much more than at the raised planes; lift:
-    the raised planes' heights over the ground, as shares of the cameras' mean distance to the look-at point;
-    texture: the least standard deviation of a window's grey levels; border: pixels taken off the found set's edge
-    (a ray next to the object's outline grazes its edge; at 1 px the teapot's dark lower rim, which meets the
-    ground, stayed in the set on its frontal arc)."""
+    """How the ground is swept. neighbours: how many training cameras each view is compared with, those whose angle
+    about the look-at point lies nearest angle_deg (near cameras see too little parallax between the ground and the
+    raised planes, far ones too different a view); best: how many of them must agree (the object hides the ground
+    from some); window: the correlation's window, pixels; agree: the correlation the best neighbours reach at the
+    ground; margin: by how much more than at the raised planes; lift: the raised planes' heights over the ground,
+    as shares of the cameras' median distance to the look-at point; texture: the least standard deviation of a
+    window's grey levels; border: pixels taken off the found set's edge (a ray next to the object's outline grazes
+    its edge; at 1 px the teapot's dark lower rim, which meets the ground, stayed in the set on its frontal arc)."""
 
     neighbours: int = 4
     angle_deg: float = 20.0
@@ -84,7 +83,7 @@ def _neighbours(rays: np.ndarray, d: int, cfg: SweepConfig) -> np.ndarray:
 def ground_sweep(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, plane, centre,
                  cfg: SweepConfig = SweepConfig()) -> np.ndarray:
     """Training frames (module docstring's spaces), the ground plane (a, b, c) and the look-at point centre (3,) ->
-    (K, 3) int64 (frame, row, col), the pixels whose patch agrees with the nearest views through the ground plane
+    (K, 3) int64 (frame, row, col), the pixels whose window agrees with its neighbours' through the ground plane
     and not through the raised planes (SweepConfig)."""
     c2w = np.asarray(c2w, np.float64)
     n, h, w = images.shape[:3]
@@ -99,16 +98,15 @@ def ground_sweep(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, pl
     for d in range(n):
         near = _neighbours(rays, d, cfg)
         scores = np.full((len(heights), len(near), h, w), -1.0, np.float32)
-        texture = None
+        texture = window_ncc(grey[d], grey[d], cfg.window)[1]
         for j, s in enumerate(near):
             for i, dz in enumerate(heights):
                 hm = plane_homography(c2w[d], intrinsics[d], c2w[s], intrinsics[s], (a, b, c + dz))
                 warped = cv2.warpPerspective(grey[s], hm, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                              borderValue=-1.0)
-                ncc, std = window_ncc(grey[d], warped, cfg.window)
+                ncc = window_ncc(grey[d], warped, cfg.window)[0]
                 inside = cv2.erode((warped >= 0).astype(np.uint8), np.ones((cfg.window,) * 2, np.uint8)) > 0
                 scores[i, j] = np.where(inside, ncc, -1.0)
-                texture = std
         # the mean of the `best` neighbours at each height (the object hides the ground from some of them)
         top = np.sort(scores, axis=1)[:, -cfg.best:].mean(axis=1)
         found = (top[0] >= cfg.agree) & (top[0] - top[1:].max(axis=0) >= cfg.margin) & (texture >= cfg.texture)
