@@ -93,8 +93,8 @@ class FitConfig:
                                              "cameras span less than 300 deg round the object (a frontal arc: "
                                              "fewer floaters), else 0 (docs/capture.md; a fit's core treats -1 as 0)")
     ground_sweep: bool = config_field(False, "with --seen-ground-weight: also count as showing the ground the "
-                                      "pixels whose patch agrees with the nearest views warped through the ground "
-                                      "plane and not through planes a little over it (snapshot3d/ground_sweep.py; "
+                                      "pixels whose window agrees with the views about 20 deg away warped through the "
+                                      "ground plane and not through planes a little over it (snapshot3d/ground_sweep.py; "
                                       "7-9% of a frontal arc's pixels, against about 1% from the matched "
                                       "features; off: on the 120 deg arcs the bunny lost 1.8 dB, the rest "
                                       "moved within the fits' spread, docs/capture.md)")
