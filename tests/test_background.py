@@ -375,7 +375,7 @@ def test_a_bench_row_says_how_far_the_poses_lie_from_the_truth(capture):
 def test_the_outline_split_counts_the_ring_and_the_inside_apart():
     """A 20x20 square object in a 40x40 view: errors on its two outer pixel rows and columns fall in the ring alone,
     errors at its centre in the inside alone; coverage is the mean opacity over the mask."""
-    from snapshot3d.train.field.object_score import outline_split
+    from snapshot3d.train.field.object_score import inner_mask, outline_split
     mask = np.zeros((40, 40), bool)
     mask[10:30, 10:30] = True
     gt = np.full((40, 40, 3), 0.5, np.float32)
@@ -392,6 +392,9 @@ def test_the_outline_split_counts_the_ring_and_the_inside_apart():
     s = outline_split(rgb, acc, gt, mask)
     assert s["object_ring_psnr"] == 100.0
     assert s["object_inner_psnr"] == pytest.approx(-10 * np.log10(0.04 * 4 / 256), rel=1e-6, abs=1e-3)
+    # the inside handed in (score_object erodes each mask once for both truths) reads the same; the 16x16 centre
+    inner = inner_mask(mask)
+    assert inner.sum() == 16 * 16 and outline_split(rgb, acc, gt, mask, inner=inner) == s
 
 
 def test_the_edge_split_tells_the_ground_near_the_object_from_the_rest():

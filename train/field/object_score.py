@@ -13,7 +13,7 @@ from .field import decode, sample_planes
 from .render import occupancy_from_planes, render_pixels, render_rays
 from .sampler import BoxFrame
 
-__all__ = ["score_object", "outline_split", "edge_split", "ground_pixels", "clean_ceiling", "density_share_outside_box"]
+__all__ = ["score_object", "outline_split", "inner_mask", "edge_split", "ground_pixels", "clean_ceiling", "density_share_outside_box"]
 
 RING_PX = 2   # the outline's ring: the true mask's pixels within this many pixels of its edge
 NEAR_GROUND = 2.0   # the ground near the object: its footprint (the true box's) this many times as wide about its centre
@@ -24,12 +24,19 @@ def _psnr(err: np.ndarray) -> float:
     return -10 * np.log10(max(float(err.mean()), 1e-10)) if err.size else 100.0
 
 
-def outline_split(rgb: np.ndarray, acc: np.ndarray, gt: np.ndarray, mask: np.ndarray, ring_px: int = RING_PX) -> dict:
+def inner_mask(mask: np.ndarray, ring_px: int = RING_PX) -> np.ndarray:
+    """mask (H, W) bool -> (H, W) bool, its pixels more than `ring_px` from its edge (the frame's border is not one)."""
+    return cv2.erode(mask.astype(np.uint8), np.ones((2 * ring_px + 1,) * 2, np.uint8), borderValue=1) > 0
+
+
+def outline_split(rgb: np.ndarray, acc: np.ndarray, gt: np.ndarray, mask: np.ndarray, ring_px: int = RING_PX,
+                  inner: np.ndarray | None = None) -> dict:
     """One view: rgb, gt (H, W, 3) RGB [0, 1], acc (H, W) the planes' opacity, mask (H, W) bool the object's true
     mask -> object_ring_psnr: dB over the mask's pixels within `ring_px` of its edge (where rays that graze the
     object pass); object_inner_psnr: dB over the rest of the mask; object_coverage: mean opacity inside the mask
-    (1: the planes cover all of the object; lower: parts of it are explained by the background or left empty)."""
-    inner = cv2.erode(mask.astype(np.uint8), np.ones((2 * ring_px + 1,) * 2, np.uint8), borderValue=1) > 0
+    (1: the planes cover all of the object; lower: parts of it are explained by the background or left empty).
+    `inner`: `inner_mask(mask, ring_px)` when the caller has it already."""
+    inner = inner_mask(mask, ring_px) if inner is None else inner
     err = (rgb - gt) ** 2
     return {"object_ring_psnr": _psnr(err[mask & ~inner]), "object_inner_psnr": _psnr(err[inner]),
             "object_coverage": float(acc[mask].mean()) if mask.any() else 1.0}
@@ -130,9 +137,10 @@ def score_object(planes: torch.Tensor, decoder, box, truth: PosedImages, true_bo
         err = (rgb - gt) ** 2
         obj.append(_psnr(err[mask]))
         white.append(_psnr(err))
-        split.append(outline_split(rgb, acc, gt, mask))
+        inner = inner_mask(mask)
+        split.append(outline_split(rgb, acc, gt, mask, inner=inner))
         if clean is not None:
-            on_white = outline_split(rgb, acc, clean.images[i], mask)
+            on_white = outline_split(rgb, acc, clean.images[i], mask, inner=inner)
             split[-1].update({"object_clean_psnr": _psnr(((rgb - clean.images[i]) ** 2)[mask]),
                               "object_clean_ring_psnr": on_white["object_ring_psnr"],
                               "object_clean_inner_psnr": on_white["object_inner_psnr"]})
