@@ -42,23 +42,18 @@ class SweepConfig:
     border: int = 3
 
 
-def _cv(c2w: np.ndarray, intrinsics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One OpenGL camera c2w (4, 4) and (fx, fy, cx, cy) -> (K (3, 3) for OpenCV's integer pixel centres, R (3, 3)
-    world-to-camera rotation of the OpenCV camera (x right, y down, z forward), C (3,) its centre)."""
-    fx, fy, cx, cy = (float(v) for v in intrinsics)
-    k = np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
-    r = (np.asarray(c2w, np.float64)[:3, :3] @ np.diag([1.0, -1.0, -1.0])).T
-    return k, r, np.asarray(c2w, np.float64)[:3, 3]
-
-
 def plane_homography(c2w_dst, intr_dst, c2w_src, intr_src, plane) -> np.ndarray:
     """The two cameras (OpenGL c2w (4, 4), intrinsics (fx, fy, cx, cy)) and the plane z = a x + b y + c -> (3, 3) H
-    that maps a pixel of dst (OpenCV's integer centres) to the pixel of src that sees the same point of the plane."""
-    kd, rd, cd = _cv(c2w_dst, intr_dst)
-    ks, rs, cs = _cv(c2w_src, intr_src)
+    that maps a pixel of dst (OpenCV's integer centres) to the pixel of src that sees the same point of the plane:
+    each camera's projection (`bundle.projection`) of the plane's points (x, y, 1), the one through the other's
+    inverse."""
+    from .bundle import projection
+
     a, b, c = (float(v) for v in plane)
-    n = np.array([-a, -b, 1.0])
-    h = ks @ rs @ (np.outer(cd - cs, n) + (c - n @ cd) * np.eye(3)) @ rd.T @ np.linalg.inv(kd)
+    on_plane = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [a, b, c], [0.0, 0.0, 1.0]])   # (x, y, 1) -> world
+    half = np.array([[1.0, 0.0, -0.5], [0.0, 1.0, -0.5], [0.0, 0.0, 1.0]])   # centres at +0.5 -> OpenCV's
+    h = half @ projection(c2w_src, intr_src) @ on_plane @ np.linalg.inv(
+        half @ projection(c2w_dst, intr_dst) @ on_plane)
     return h / h[2, 2]
 
 
