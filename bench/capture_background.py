@@ -72,6 +72,13 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          # the cells that growing the object's cells adds cut where the photos' silhouettes, not grown, do not hold
          # them (--object-halo)
          "outer-halo": ("transforms.json", "outer", "auto", {"object_halo": 0.2}),
+         # the views the object alone is fitted to made solid over a width about one half (--object-opaque, 0.02 by
+         # default since 2026-12-07; 1: as rendered, the default before); named by the opacity that goes to 0
+         # (1/2 - width/2: 0.49 is width 0.02, the default's setting)
+         "outer-soft": ("transforms.json", "outer", "auto", {"object_opaque": 1.0}),
+         "outer-opaque": ("transforms.json", "outer", "auto", {"object_opaque": 0.5}),
+         "outer-opaque-0.4": ("transforms.json", "outer", "auto", {"object_opaque": 0.2}),
+         "outer-opaque-0.49": ("transforms.json", "outer", "auto", {"object_opaque": 0.02}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),

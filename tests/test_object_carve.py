@@ -121,6 +121,10 @@ def test_the_object_only_planes_empty_the_other_cells_and_keep_the_object():
     assert before[4:60, 4:60, 1].mean() > 0.5 and before[column].mean() > 0.25, "the first fit is not dense"
     target, keep = object_views(planes, decoder, posed)
     assert target.images.shape == (12, 48, 48, 3) and keep[30, 30, 20] and not keep[5, 5, 1]
+    solid, _ = object_views(planes, decoder, posed, opaque=0.02)   # the same views, their opacity made solid
+    soft = target.alpha
+    assert np.all(solid.alpha[soft >= 0.51] == 1) and np.all(solid.alpha[soft <= 0.49] == 0)
+    assert ((soft > 0.05) & (soft < 0.95)).mean() > 0.01, "the teacher has no soft pixels to make solid"
     alone = fit(target, decoder, object_config(FitConfig(steps=100, batch_rays=1024, plane_res=32, plane_channels=4)),
                 init_planes=planes, hull=keep)
     after = cell_alpha(alone.state.planes.planes.detach(), decoder, box, 64)
@@ -208,6 +212,25 @@ def test_the_object_takes_the_photos_colour_where_it_is_opaque_and_its_own_at_it
     a = cover[0, 0, 3]
     half = a * (own + photo) / 2 + 1 - a   # half way up the ramp: half the photo's colour, half its own
     np.testing.assert_allclose(out[0, 0, 3], half, rtol=1e-5, atol=1e-5)
+
+
+def test_the_views_pushed_towards_solid_keep_their_colour_and_their_half_way_outline():
+    from snapshot3d.train.field.object_carve import photo_colours, solid_cover
+
+    cover = np.array([[[0.0, 0.2, 0.25, 0.5, 0.6, 0.75, 0.92, 1.0]]], np.float32)   # (1, 1, 8)
+    np.testing.assert_array_equal(solid_cover(cover, 1.0), cover)
+    solid = solid_cover(cover, 0.5)
+    np.testing.assert_allclose(solid[0, 0], [0, 0, 0, 0.5, 0.7, 1, 1, 1], atol=1e-6)
+    own, photo = np.array([0.2, 0.4, 0.6], np.float32), np.array([0.7, 0.1, 0.3], np.float32)
+    views = (cover[..., None] * own + (1 - cover[..., None])).astype(np.float32)
+    photos = np.broadcast_to(photo, views.shape)
+    plain, pushed = photo_colours(views, cover, photos), photo_colours(views, cover, photos, opaque=0.5)
+    both = (cover[0, 0] > 1e-3) & (solid[0, 0] > 1e-3)   # the colour under each opacity: the same either way
+    under = [(out[0, 0, both] - (1 - a[0, 0, both, None])) / a[0, 0, both, None] for out, a in ((plain, cover),
+                                                                                               (pushed, solid))]
+    np.testing.assert_allclose(under[0], under[1], atol=1e-5)
+    np.testing.assert_allclose(pushed[0, 0, ~(solid[0, 0] > 0)], 1.0, atol=1e-6)   # below the margin: white
+    np.testing.assert_allclose(pushed[0, 0, 6], photo, atol=1e-6)   # 0.92 opaque now, the photo's colour
 
 
 def test_the_refined_cameras_give_the_corrected_rays():

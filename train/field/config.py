@@ -151,6 +151,10 @@ class FitConfig:
                                       "outside the photos' silhouettes, not grown, in more than this share of the "
                                       "views that see them, at every height (measured: it cuts the object's skin "
                                       "too, docs/capture.md); 1: off")
+    object_opaque: float = config_field(0.02, "with --object-steps: the opacity of the views the object alone is "
+                                        "fitted to, made solid (a real object is opaque): from 0 to 1 over this "
+                                        "width about one half (the views' outline, as a mask; docs/capture.md); 1: "
+                                        "as rendered")
 
 
 @dataclass
@@ -201,6 +205,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("object-silhouette", 0 <= cfg.object_silhouette <= 1, "in [0, 1]"),
         ("object-base-keep", 0 <= cfg.object_base_keep <= 1, "in [0, 1]"),
         ("object-halo", 0 <= cfg.object_halo <= 1, "in [0, 1]"),
+        ("object-opaque", 0 < cfg.object_opaque <= 1, "in (0, 1]"),
         ("wall-margin", 0 < cfg.wall_margin <= 0.25, "in (0, 0.25]"),
     ]
 

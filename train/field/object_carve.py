@@ -33,7 +33,7 @@ from snapshot3d import formats
 from snapshot3d.posed import PosedImages
 
 __all__ = ["object_cells", "object_views", "band_vote", "halo_vote", "object_config", "photo_colours", "refined_c2w",
-           "PHOTO_RAMP", "SOLID", "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
+           "solid_cover", "PHOTO_RAMP", "SOLID", "FLOOR_BAND", "ABOVE", "REACH", "KEEP_SHARE", "NEAR",
            "TEACHER_SIZE", "DISTIL_LR", "STEP_DOWN", "KNN", "GROUND_LAYERS",
            "FOOTPRINT", "SEPARATE"]
 
@@ -127,15 +127,25 @@ def _grow(mask: np.ndarray, r: int) -> np.ndarray:
 
 
 def photo_colours(views: np.ndarray, cover: np.ndarray, photos: np.ndarray,
-                  ramp: tuple[float, float] = PHOTO_RAMP) -> np.ndarray:
+                  ramp: tuple[float, float] = PHOTO_RAMP, opaque: float = 1.0) -> np.ndarray:
     """views (N, H, W, 3) RGB in [0, 1] rendered over white with opacity cover (N, H, W) in [0, 1], photos
     (N, H, W, 3) RGB of the same cameras -> (N, H, W, 3) float32 over white with the same opacity: the colour is the
     photo's where the view is opaque (weight rising from 0 at opacity ramp[0] to 1 at ramp[1]) and the view's own
-    (un-premultiplied) colour at its soft edge, where the photo shows the room through the object's outline."""
+    (un-premultiplied) colour at its soft edge, where the photo shows the room through the object's outline. With
+    `opaque` under 1 that colour is laid over white by `solid_cover(cover, opaque)` instead of cover."""
     a = cover[..., None].astype(np.float32)
     own = np.where(a > 1e-3, (views - (1 - a)) / np.maximum(a, 1e-3), 1.0).clip(0.0, 1.0)
     w = np.clip((a - ramp[0]) / (ramp[1] - ramp[0]), 0.0, 1.0)
-    return (a * (w * photos + (1 - w) * own) + (1 - a)).astype(np.float32)
+    b = solid_cover(a, opaque)
+    return (b * (w * photos + (1 - w) * own) + (1 - b)).astype(np.float32)
+
+
+def solid_cover(cover: np.ndarray, width: float) -> np.ndarray:
+    """cover (N, H, W) opacity in [0, 1] -> the same shape, made solid: from 0 to 1 over `width` about one half,
+    linear between (the half-way outline stays where it is); width 1 returns cover as it is."""
+    if width >= 1:
+        return cover
+    return np.clip((cover - 0.5) / width + 0.5, 0.0, 1.0).astype(cover.dtype)
 
 
 def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray:
@@ -154,7 +164,7 @@ def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray
 
 
 def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None, silhouette: float = 1.0,
-                 base_keep: float = 0.0, halo: float = 1.0):
+                 base_keep: float = 0.0, halo: float = 1.0, opaque: float = 1.0):
     """planes (3, C, R, R) torch, fitted with the background model over posed.box; poses: the fit's pose corrections
     (V, 6) of posed.train, or None -> (the views to fit the object alone to: posed's training views at those poses,
     rendered with the object's cells only over white, at most TEACHER_SIZE pixels on the longer side, their colour
@@ -164,7 +174,8 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     with `base_keep` over 0, the floor band's solid cells that its rule drops are kept where they fall outside the
     silhouettes in fewer than that share of the views (a broad base: the bunny's); with `halo` under 1, the cells
     that growing the object's cells added are cut, at every height, where they fall outside the silhouettes not
-    grown in more than that share of the views (`halo_vote`)."""
+    grown in more than that share of the views (`halo_vote`); with `opaque` under 1, the views' opacity is made
+    solid over that width about one half (`solid_cover`)."""
     import cv2
     import torch
 
@@ -195,8 +206,8 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
         keep = torch.from_numpy(cells).to(keep.device)
         views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     cover = np.clip(cover, 0.0, 1.0)
-    return PosedImages(images=photo_colours(views, cover, photos), alpha=cover, c2w=c2w,
-                       intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
+    return PosedImages(images=photo_colours(views, cover, photos, opaque=opaque), alpha=solid_cover(cover, opaque),
+                       c2w=c2w, intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
                        name=posed.name), keep
 
 
