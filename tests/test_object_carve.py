@@ -214,7 +214,7 @@ def test_the_object_takes_the_photos_colour_where_it_is_opaque_and_its_own_at_it
     np.testing.assert_allclose(out[0, 0, 3], half, rtol=1e-5, atol=1e-5)
 
 
-def test_the_views_pushed_towards_solid_keep_their_colour_and_their_half_way_outline():
+def test_the_views_made_solid_keep_their_colour_and_their_half_way_outline():
     from snapshot3d.train.field.object_carve import photo_colours, solid_cover
 
     cover = np.array([[[0.0, 0.2, 0.25, 0.5, 0.6, 0.75, 0.92, 1.0]]], np.float32)   # (1, 1, 8)
@@ -229,7 +229,7 @@ def test_the_views_pushed_towards_solid_keep_their_colour_and_their_half_way_out
     under = [(out[0, 0, both] - (1 - a[0, 0, both, None])) / a[0, 0, both, None] for out, a in ((plain, cover),
                                                                                                (pushed, solid))]
     np.testing.assert_allclose(under[0], under[1], atol=1e-5)
-    np.testing.assert_allclose(pushed[0, 0, ~(solid[0, 0] > 0)], 1.0, atol=1e-6)   # below the margin: white
+    np.testing.assert_allclose(pushed[0, 0, ~(solid[0, 0] > 0)], 1.0, atol=1e-6)   # below the ramp: white
     np.testing.assert_allclose(pushed[0, 0, 6], photo, atol=1e-6)   # 0.92 opaque now, the photo's colour
 
 

@@ -16,7 +16,9 @@ under a belly, which stands under the object's own cells). `object_views` render
 views of the fitted planes with every other cell skipped, over white, at the poses the fit refined; where a view is
 opaque its colour is the photo's (`photo_colours`): the planes of a fit with the ground in the box paint the ground's
 texture into the object's colour too (the plane over the floor is shared by every height), which the photo does not
-have. The planes are then fitted to those views (from where
+have. Their opacity is made solid about one half (`solid_cover`, cfg.object_opaque): where a ground of the object's
+colour lies behind, the fit leaves the object partly see-through, and a real object is opaque. The planes are then
+fitted to those views (from where
 they are, DISTIL_LR) with the object's cells as their hull: the rays skip the other cells and the empty-space
 penalty (`fit.empty_alpha`) drives their density to zero, so that the decode side, which finds its occupancy from
 the planes alone, sees them empty too (`fit.fit` runs that fit). Fitting them with the cells cut while still
@@ -141,8 +143,9 @@ def photo_colours(views: np.ndarray, cover: np.ndarray, photos: np.ndarray,
 
 
 def solid_cover(cover: np.ndarray, width: float) -> np.ndarray:
-    """cover (N, H, W) opacity in [0, 1] -> the same shape, made solid: from 0 to 1 over `width` about one half,
-    linear between (the half-way outline stays where it is); width 1 returns cover as it is."""
+    """cover: opacity in [0, 1], any shape ((N, H, W) views, or (N, H, W, 1)) -> the same shape, made solid: from 0
+    to 1 over `width` about one half, linear between (the half-way outline stays where it is); width 1 returns
+    cover as it is."""
     if width >= 1:
         return cover
     return np.clip((cover - 0.5) / width + 0.5, 0.0, 1.0).astype(cover.dtype)
