@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["SweepConfig", "plane_homography", "window_ncc", "ground_sweep"]
+__all__ = ["SweepConfig", "plane_homography", "window_stats", "window_ncc", "ground_sweep"]
 
 
 @dataclass(frozen=True)
@@ -57,13 +57,21 @@ def plane_homography(c2w_dst, intr_dst, c2w_src, intr_src, plane) -> np.ndarray:
     return h / h[2, 2]
 
 
-def window_ncc(x: np.ndarray, y: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
-    """x, y (H, W) float32 grey images -> (normalised cross-correlation of each pixel's window (H, W) in [-1, 1],
-    the standard deviation of x's window (H, W))."""
+def window_stats(x: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """x (H, W) float32 grey image -> (the mean of each pixel's window, its variance), both (H, W)."""
     box = (window, window)
-    mx, my = cv2.blur(x, box), cv2.blur(y, box)
-    vx = np.maximum(cv2.blur(x * x, box) - mx * mx, 0.0)
-    vy = np.maximum(cv2.blur(y * y, box) - my * my, 0.0)
+    m = cv2.blur(x, box)
+    return m, np.maximum(cv2.blur(x * x, box) - m * m, 0.0)
+
+
+def window_ncc(x: np.ndarray, y: np.ndarray, window: int,
+               x_stats: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """x, y (H, W) float32 grey images -> (normalised cross-correlation of each pixel's window (H, W) in [-1, 1],
+    the standard deviation of x's window (H, W)); x_stats: `window_stats(x, window)` when the caller has it
+    already (one view against many warps)."""
+    box = (window, window)
+    mx, vx = window_stats(x, window) if x_stats is None else x_stats
+    my, vy = window_stats(y, window)
     cov = cv2.blur(x * y, box) - mx * my
     return cov / np.sqrt(vx * vy + 1e-8), np.sqrt(vx)
 
@@ -93,13 +101,14 @@ def ground_sweep(images: np.ndarray, c2w: np.ndarray, intrinsics: np.ndarray, pl
     for d in range(n):
         near = _neighbours(rays, d, cfg)
         scores = np.full((len(heights), len(near), h, w), -1.0, np.float32)
-        texture = window_ncc(grey[d], grey[d], cfg.window)[1]
+        stats = window_stats(grey[d], cfg.window)   # the view's own windows, once for all its warps
+        texture = np.sqrt(stats[1])
         for j, s in enumerate(near):
             for i, dz in enumerate(heights):
                 hm = plane_homography(c2w[d], intrinsics[d], c2w[s], intrinsics[s], (a, b, c + dz))
                 warped = cv2.warpPerspective(grey[s], hm, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                              borderValue=-1.0)
-                ncc = window_ncc(grey[d], warped, cfg.window)[0]
+                ncc = window_ncc(grey[d], warped, cfg.window, stats)[0]
                 inside = cv2.erode((warped >= 0).astype(np.uint8), np.ones((cfg.window,) * 2, np.uint8)) > 0
                 scores[i, j] = np.where(inside, ncc, -1.0)
         # the mean of the `best` neighbours at each height (the object hides the ground from some of them)

@@ -13,7 +13,8 @@ from .field import decode, sample_planes
 from .render import occupancy_from_planes, render_pixels, render_rays
 from .sampler import BoxFrame
 
-__all__ = ["score_object", "outline_split", "inner_mask", "edge_split", "ground_pixels", "clean_ceiling", "density_share_outside_box"]
+__all__ = ["score_object", "outline_split", "inner_mask", "edge_split", "ground_pixels", "clean_ceiling",
+           "density_share_outside_box"]
 
 RING_PX = 2   # the outline's ring: the true mask's pixels within this many pixels of its edge
 NEAR_GROUND = 2.0   # the ground near the object: its footprint (the true box's) this many times as wide about its centre
