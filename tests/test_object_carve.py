@@ -220,7 +220,7 @@ def test_the_views_made_solid_keep_their_colour_and_their_half_way_outline():
     cover = np.array([[[0.0, 0.2, 0.25, 0.5, 0.6, 0.75, 0.92, 1.0]]], np.float32)   # (1, 1, 8)
     np.testing.assert_array_equal(solid_cover(cover, 1.0), cover)
     solid = solid_cover(cover, 0.5)
-    np.testing.assert_allclose(solid[0, 0], [0, 0, 0, 0.5, 0.7, 1, 1, 1], atol=1e-6)
+    np.testing.assert_allclose(solid[0, 0], [0, 0, 0, 0.5, 0.7, 1, 1, 1], rtol=1e-6, atol=1e-6)
     own, photo = np.array([0.2, 0.4, 0.6], np.float32), np.array([0.7, 0.1, 0.3], np.float32)
     views = (cover[..., None] * own + (1 - cover[..., None])).astype(np.float32)
     photos = np.broadcast_to(photo, views.shape)
@@ -228,9 +228,9 @@ def test_the_views_made_solid_keep_their_colour_and_their_half_way_outline():
     both = (cover[0, 0] > 1e-3) & (solid[0, 0] > 1e-3)   # the colour under each opacity: the same either way
     under = [(out[0, 0, both] - (1 - a[0, 0, both, None])) / a[0, 0, both, None] for out, a in ((plain, cover),
                                                                                                (pushed, solid))]
-    np.testing.assert_allclose(under[0], under[1], atol=1e-5)
-    np.testing.assert_allclose(pushed[0, 0, ~(solid[0, 0] > 0)], 1.0, atol=1e-6)   # below the ramp: white
-    np.testing.assert_allclose(pushed[0, 0, 6], photo, atol=1e-6)   # 0.92 opaque now, the photo's colour
+    np.testing.assert_allclose(under[0], under[1], rtol=1e-6, atol=1e-5)
+    np.testing.assert_allclose(pushed[0, 0, ~(solid[0, 0] > 0)], 1.0, rtol=1e-6, atol=1e-6)   # below the ramp: white
+    np.testing.assert_allclose(pushed[0, 0, 6], photo, rtol=1e-6, atol=1e-6)   # 0.92 opaque now, the photo's colour
 
 
 def test_the_refined_cameras_give_the_corrected_rays():
