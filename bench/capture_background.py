@@ -82,6 +82,8 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-opaque": ("transforms.json", "outer", "auto", {"object_opaque": 0.5}),
          "outer-opaque-0.4": ("transforms.json", "outer", "auto", {"object_opaque": 0.2}),
          "outer-opaque-0.49": ("transforms.json", "outer", "auto", {"object_opaque": 0.02}),
+         # the same made solid on a grid 4 times finer and averaged back: an anti-aliased outline (--object-subpixel)
+         "outer-subpixel-4": ("transforms.json", "outer", "auto", {"object_subpixel": 4}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),

@@ -281,6 +281,19 @@ def test_bench_fit_captures_is_parsed_and_an_unknown_mode_refused(tmp_path):
     assert _fit_seeds("", 2) == [2] and _fit_seeds("0,1,2", 2) == [0, 1, 2]
 
 
+def test_bench_capture_chain_refuses_a_fit_with_masks_and_bad_photo_seeds_before_it_writes(tmp_path):
+    out = tmp_path / "out"
+    proc = run_cli("bench", "capture-chain", "--modes", "outer,masked", "--out", str(out))
+    assert_one_line_error(proc, "unknown fit 'masked' (choose from the photos' fits")
+    proc = run_cli("bench", "capture-chain", "--photo-seeds", "0,x", "--out", str(out))
+    assert_one_line_error(proc, "--photo-seeds must be comma-separated integers, not '0,x'")
+    assert not out.exists()
+    from snapshot3d.bench.capture_chain import _cli
+    from snapshot3d.errors import UserError
+    with pytest.raises(UserError, match=r"^snapshot3d embed failed: .*missing\.s3d"):   # a step's own one line
+        _cli("embed", str(tmp_path / "missing.s3d"), "-o", str(tmp_path / "x.png"))
+
+
 def test_the_sides_and_top_are_cut_round_the_dense_cells_with_a_margin():
     g = 32
     rng = np.random.default_rng(0)

@@ -233,6 +233,29 @@ def test_the_views_made_solid_keep_their_colour_and_their_half_way_outline():
     np.testing.assert_allclose(pushed[0, 0, 6], photo, rtol=1e-6, atol=1e-6)   # 0.92 opaque now, the photo's colour
 
 
+def test_the_views_made_solid_on_a_finer_grid_keep_an_anti_aliased_outline():
+    from snapshot3d.train.field.object_carve import solid_cover
+
+    h = w = 40
+    y, x = np.mgrid[0:h, 0:w] + 0.5                      # pixel centres
+    radius, centre = 11.3, (20.2, 19.7)
+    dist = np.hypot(x - centre[0], y - centre[1])
+    cover = np.clip(0.5 - (dist - radius) / 3, 0, 1).astype(np.float32)[None]   # (1, H, W): a soft disc, half at r
+    k = 16                                               # the disc's true share of each pixel
+    fy, fx = (np.mgrid[0:h * k, 0:w * k] + 0.5) / k
+    truth = (np.hypot(fx - centre[0], fy - centre[1]) < radius).reshape(h, k, w, k).mean(axis=(1, 3))
+    step, fine = solid_cover(cover, 0.02), solid_cover(cover, 0.02, subpixel=8)
+    assert fine.shape == cover.shape and fine.dtype == np.float32
+    np.testing.assert_allclose(solid_cover(cover[..., None], 0.02, subpixel=8)[..., 0], fine, rtol=1e-6, atol=1e-6)
+    edge = (truth > 0) & (truth < 1)
+    np.testing.assert_allclose(fine[0][truth == 1], 1.0, rtol=0, atol=1e-3)   # inside: solid
+    np.testing.assert_allclose(fine[0][dist > radius + 2], 0.0, rtol=0, atol=1e-6)   # outside: nothing
+    err_fine, err_step = np.abs(fine[0] - truth)[edge].mean(), np.abs(step[0] - truth)[edge].mean()
+    assert err_fine < 0.03 and err_step > 5 * err_fine, (err_fine, err_step)   # measured 0.007 and 0.185
+    assert abs(fine.sum() - np.pi * radius ** 2) < 0.01 * np.pi * radius ** 2
+    np.testing.assert_array_equal(solid_cover(cover, 1.0, subpixel=8), cover)   # width 1: as it is
+
+
 def test_the_refined_cameras_give_the_corrected_rays():
     from snapshot3d.cameras import orbit_poses
     from snapshot3d.train.field.object_carve import refined_c2w

@@ -121,6 +121,24 @@ def add_commands(sub) -> None:
                     "fits: held-out input photos, the fit with its background model, the object alone")
     _quick(bg, size=48, views=8, steps=20)
 
+    bc = add(bsub, "capture-chain", "issue 40's chain on one synthetic capture: fit --budget auto --medium print, "
+                                    "embed, sheet, simulate and decode; the object as fitted and as decoded scored "
+                                    "against the capture's truth",
+             _run("snapshot3d.bench.capture_chain", "bench_capture_chain_command"))
+    _out(bc)
+    bc.add_argument("--mesh", default="spot", help="built-in mesh the capture is made of")
+    bc.add_argument("--modes", default="outer", help="comma-separated fits of bench capture-background (the photos' "
+                    "fits: outer and its candidates), over the fit's defaults")
+    bc.add_argument("--size", type=int, default=160, help="capture width in pixels (height 3/4 of it)")
+    bc.add_argument("--views", type=int, default=48, help="capture frames (every 8th held out)")
+    bc.add_argument("--steps", type=int, default=400, help="fit steps per rung of the budget's ladder")
+    bc.add_argument("--seed", type=int, default=0, help="capture seed")
+    bc.add_argument("--fit-seed", type=int, default=0, help="fit seed")
+    bc.add_argument("--severity", default="moderate", choices=SEVERITIES, help="simulate's severity")
+    bc.add_argument("--photo-seeds", default="0,1,2", help="comma-separated simulate seeds, one photo each")
+    bc.add_argument("--name", default="capture_chain", help="results file name (without .json/.csv)")
+    _quick(bc, size=48, views=8, steps=20, photo_seeds="0")
+
     bs = add(bsub, "capture-summary", "issue 40's targets by the medians over fit seeds, from bench "
                                       "capture-background results files (no fitting): per capture and "
                                       "--seen-ground-weight, the object's gap to the masked fit and the floaters",

@@ -319,7 +319,7 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
         poses = None if st.poses is None else st.poses.params.detach().cpu().numpy()
         now = decoder if st.head is None else st.head
         target = object_views(st.planes.planes.detach(), now, posed, poses, cfg.object_silhouette,
-                              cfg.object_base_keep, cfg.object_halo, cfg.object_opaque)
+                              cfg.object_base_keep, cfg.object_halo, cfg.object_opaque, cfg.object_subpixel)
         if target is not None:
             sub = object_config(cfg)
             alone = fit(target[0], now, sub, init_planes=st.planes.planes.detach(), hull=target[1],

@@ -129,26 +129,40 @@ def _grow(mask: np.ndarray, r: int) -> np.ndarray:
 
 
 def photo_colours(views: np.ndarray, cover: np.ndarray, photos: np.ndarray,
-                  ramp: tuple[float, float] = PHOTO_RAMP, opaque: float = 1.0) -> np.ndarray:
+                  ramp: tuple[float, float] = PHOTO_RAMP, opaque: float = 1.0, subpixel: int = 1) -> np.ndarray:
     """views (N, H, W, 3) RGB in [0, 1] rendered over white with opacity cover (N, H, W) in [0, 1], photos
     (N, H, W, 3) RGB of the same cameras -> (N, H, W, 3) float32 over white with the same opacity: the colour is the
     photo's where the view is opaque (weight rising from 0 at opacity ramp[0] to 1 at ramp[1]) and the view's own
     (un-premultiplied) colour at its soft edge, where the photo shows the room through the object's outline. With
-    `opaque` under 1 that colour is laid over white by `solid_cover(cover, opaque)` instead of cover."""
+    `opaque` under 1 that colour is laid over white by `solid_cover(cover, opaque, subpixel)` instead of cover."""
     a = cover[..., None].astype(np.float32)
     own = np.where(a > 1e-3, (views - (1 - a)) / np.maximum(a, 1e-3), 1.0).clip(0.0, 1.0)
     w = np.clip((a - ramp[0]) / (ramp[1] - ramp[0]), 0.0, 1.0)
-    b = solid_cover(a, opaque)
+    b = solid_cover(a, opaque, subpixel)
     return (b * (w * photos + (1 - w) * own) + (1 - b)).astype(np.float32)
 
 
-def solid_cover(cover: np.ndarray, width: float) -> np.ndarray:
-    """cover: opacity in [0, 1], any shape ((N, H, W) views, or (N, H, W, 1)) -> the same shape, made solid: from 0
-    to 1 over `width` about one half, linear between (the half-way outline stays where it is); width 1 returns
-    cover as it is."""
+def solid_cover(cover: np.ndarray, width: float, subpixel: int = 1) -> np.ndarray:
+    """cover: opacity in [0, 1], (N, H, W) views or (N, H, W, 1) (any shape with `subpixel` 1) -> the same shape, made
+    solid: from 0 to 1 over `width` about one half, linear between (the half-way outline stays where it is); width 1
+    returns cover as it is. With `subpixel` k over 1, each view's cover is resampled k times finer (bilinear, cv2), made
+    solid there and averaged back over each pixel's k x k (cv2's INTER_AREA): the outline falls between the pixel
+    centres where the cover crosses one half, and a pixel it crosses keeps the share of it that lies inside, as a
+    camera's pixel does (an anti-aliased outline, not a step on the pixels)."""
     if width >= 1:
         return cover
-    return np.clip((cover - 0.5) / width + 0.5, 0.0, 1.0).astype(cover.dtype)
+    if subpixel <= 1:
+        return np.clip((cover - 0.5) / width + 0.5, 0.0, 1.0).astype(cover.dtype)
+    import cv2
+
+    views = np.asarray(cover[..., 0] if cover.ndim == 4 else cover, np.float32)
+    h, w = views.shape[1:]
+    out = np.empty_like(views)
+    for i, view in enumerate(views):
+        fine = cv2.resize(view, (w * subpixel, h * subpixel), interpolation=cv2.INTER_LINEAR)
+        fine = np.clip((fine - 0.5) / width + 0.5, 0.0, 1.0)
+        out[i] = cv2.resize(fine, (w, h), interpolation=cv2.INTER_AREA)
+    return out.reshape(cover.shape).astype(cover.dtype)
 
 
 def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray:
@@ -167,7 +181,7 @@ def refined_c2w(c2w: np.ndarray, params: np.ndarray, scale: float) -> np.ndarray
 
 
 def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None = None, silhouette: float = 1.0,
-                 base_keep: float = 0.0, halo: float = 1.0, opaque: float = 1.0):
+                 base_keep: float = 0.0, halo: float = 1.0, opaque: float = 1.0, subpixel: int = 1):
     """planes (3, C, R, R) torch, fitted with the background model over posed.box; poses: the fit's pose corrections
     (V, 6) of posed.train, or None -> (the views to fit the object alone to: posed's training views at those poses,
     rendered with the object's cells only over white, at most TEACHER_SIZE pixels on the longer side, their colour
@@ -178,7 +192,7 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
     silhouettes in fewer than that share of the views (a broad base: the bunny's); with `halo` under 1, the cells
     that growing the object's cells added are cut, at every height, where they fall outside the silhouettes not
     grown in more than that share of the views (`halo_vote`); with `opaque` under 1, the views' opacity is made
-    solid over that width about one half (`solid_cover`)."""
+    solid over that width about one half (`solid_cover`), on a grid `subpixel` times finer than the pixels."""
     import cv2
     import torch
 
@@ -209,7 +223,8 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
         keep = torch.from_numpy(cells).to(keep.device)
         views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     cover = np.clip(cover, 0.0, 1.0)
-    return PosedImages(images=photo_colours(views, cover, photos, opaque=opaque), alpha=solid_cover(cover, opaque),
+    return PosedImages(images=photo_colours(views, cover, photos, opaque=opaque, subpixel=subpixel),
+                       alpha=solid_cover(cover, opaque, subpixel),
                        c2w=c2w, intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
                        name=posed.name), keep
 
