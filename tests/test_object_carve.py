@@ -224,7 +224,7 @@ def test_the_views_made_solid_keep_their_colour_and_their_half_way_outline():
     own, photo = np.array([0.2, 0.4, 0.6], np.float32), np.array([0.7, 0.1, 0.3], np.float32)
     views = (cover[..., None] * own + (1 - cover[..., None])).astype(np.float32)
     photos = np.broadcast_to(photo, views.shape)
-    plain, pushed = photo_colours(views, cover, photos), photo_colours(views, cover, photos, opaque=0.5)
+    plain, pushed = photo_colours(views, cover, photos), photo_colours(views, cover, photos, solid=solid)
     both = (cover[0, 0] > 1e-3) & (solid[0, 0] > 1e-3)   # the colour under each opacity: the same either way
     under = [(out[0, 0, both] - (1 - a[0, 0, both, None])) / a[0, 0, both, None] for out, a in ((plain, cover),
                                                                                                (pushed, solid))]

@@ -129,16 +129,16 @@ def _grow(mask: np.ndarray, r: int) -> np.ndarray:
 
 
 def photo_colours(views: np.ndarray, cover: np.ndarray, photos: np.ndarray,
-                  ramp: tuple[float, float] = PHOTO_RAMP, opaque: float = 1.0, subpixel: int = 1) -> np.ndarray:
+                  ramp: tuple[float, float] = PHOTO_RAMP, solid: np.ndarray | None = None) -> np.ndarray:
     """views (N, H, W, 3) RGB in [0, 1] rendered over white with opacity cover (N, H, W) in [0, 1], photos
     (N, H, W, 3) RGB of the same cameras -> (N, H, W, 3) float32 over white with the same opacity: the colour is the
     photo's where the view is opaque (weight rising from 0 at opacity ramp[0] to 1 at ramp[1]) and the view's own
     (un-premultiplied) colour at its soft edge, where the photo shows the room through the object's outline. With
-    `opaque` under 1 that colour is laid over white by `solid_cover(cover, opaque, subpixel)` instead of cover."""
+    `solid` (N, H, W), the cover made solid (`solid_cover`), that colour is laid over white by it instead."""
     a = cover[..., None].astype(np.float32)
     own = np.where(a > 1e-3, (views - (1 - a)) / np.maximum(a, 1e-3), 1.0).clip(0.0, 1.0)
     w = np.clip((a - ramp[0]) / (ramp[1] - ramp[0]), 0.0, 1.0)
-    b = solid_cover(a, opaque, subpixel)
+    b = a if solid is None else solid[..., None].astype(np.float32)
     return (b * (w * photos + (1 - w) * own) + (1 - b)).astype(np.float32)
 
 
@@ -223,9 +223,9 @@ def object_views(planes, decoder, posed: PosedImages, poses: np.ndarray | None =
         keep = torch.from_numpy(cells).to(keep.device)
         views, cover = render_views(planes, decoder, box, c2w, intrinsics, w, h, occ=occ & keep, with_opacity=True)
     cover = np.clip(cover, 0.0, 1.0)
-    return PosedImages(images=photo_colours(views, cover, photos, opaque=opaque, subpixel=subpixel),
-                       alpha=solid_cover(cover, opaque, subpixel),
-                       c2w=c2w, intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
+    solid = solid_cover(cover, opaque, subpixel)
+    return PosedImages(images=photo_colours(views, cover, photos, solid=solid), alpha=solid, c2w=c2w,
+                       intrinsics=intrinsics, box=box, train=np.arange(len(tr)), test=np.arange(0),
                        name=posed.name), keep
 
 
