@@ -84,6 +84,9 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-opaque-0.49": ("transforms.json", "outer", "auto", {"object_opaque": 0.02}),
          # the same made solid on a grid 4 times finer and averaged back: an anti-aliased outline (--object-subpixel)
          "outer-subpixel-4": ("transforms.json", "outer", "auto", {"object_subpixel": 4}),
+         # the step on the pixels at every plane size (auto gives the grid 4 times finer at 32 texels a side or
+         # fewer: a print's small rungs)
+         "outer-step": ("transforms.json", "outer", "auto", {"object_subpixel": 1}),
          "masked": ("gt/transforms_masked.json", "white", None, {}),
          "masked-refine": ("gt/transforms_masked.json", "white", None, {"refine_poses": "on"}),
          "outer-refine": ("transforms.json", "outer", "auto", {"refine_poses": "on"}),

@@ -256,6 +256,18 @@ def test_the_views_made_solid_on_a_finer_grid_keep_an_anti_aliased_outline():
     np.testing.assert_array_equal(solid_cover(cover, 1.0, subpixel=8), cover)   # width 1: as it is
 
 
+def test_the_finer_grid_is_chosen_for_coarse_planes_unless_given():
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.field.config import FitConfig, check_fit_config
+    from snapshot3d.train.field.object_carve import COARSE_RES, SUBPIXEL, subpixel_for
+
+    assert [subpixel_for(0, r) for r in (16, 24, COARSE_RES, 48, 64)] == [SUBPIXEL] * 3 + [1, 1]   # auto
+    assert subpixel_for(1, 16) == 1 and subpixel_for(8, 64) == 8   # given: as it is
+    for bad in (-1, 17):
+        with pytest.raises(UserError, match="--object-subpixel"):
+            check_fit_config(FitConfig(object_subpixel=bad))
+
+
 def test_the_refined_cameras_give_the_corrected_rays():
     from snapshot3d.cameras import orbit_poses
     from snapshot3d.train.field.object_carve import refined_c2w

@@ -155,10 +155,11 @@ class FitConfig:
                                         "fitted to, made solid (a real object is opaque): from 0 to 1 over this "
                                         "width about one half (the views' outline, as a mask; docs/capture.md); 1: "
                                         "as rendered")
-    object_subpixel: int = config_field(1, "with --object-opaque under 1: the views' opacity is made solid on a grid "
+    object_subpixel: int = config_field(0, "with --object-opaque under 1: the views' opacity is made solid on a grid "
                                         "this many times finer than their pixels and averaged back, so that the "
-                                        "outline is anti-aliased as a camera's is (docs/capture.md); 1: on the "
-                                        "pixels")
+                                        "outline is anti-aliased as a camera's is; 1: on the pixels (a step); 0: "
+                                        "auto, 4 where the planes are at most 32 texels a side (a print's small "
+                                        "rungs), else 1 (docs/capture.md)")
 
 
 @dataclass
@@ -210,7 +211,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("object-base-keep", 0 <= cfg.object_base_keep <= 1, "in [0, 1]"),
         ("object-halo", 0 <= cfg.object_halo <= 1, "in [0, 1]"),
         ("object-opaque", 0 < cfg.object_opaque <= 1, "in (0, 1]"),
-        ("object-subpixel", 1 <= cfg.object_subpixel <= 16, "in 1..16"),
+        ("object-subpixel", 0 <= cfg.object_subpixel <= 16, "in 0..16 (0: auto)"),
         ("wall-margin", 0 < cfg.wall_margin <= 0.25, "in (0, 0.25]"),
     ]
 

@@ -315,11 +315,12 @@ def fit(posed: PosedImages, decoder, cfg: FitConfig, checkpoint: Path | None = N
     # it: the ground then stays in the box as one piece with the object, and the step only costs (docs/capture.md)
     lost_ground = "ground_z" in posed.info and posed.info["ground_z"] is None
     if st.background is not None and cfg.object_steps > 0 and not lost_ground:
-        from .object_carve import object_config, object_views
+        from .object_carve import object_config, object_views, subpixel_for
         poses = None if st.poses is None else st.poses.params.detach().cpu().numpy()
         now = decoder if st.head is None else st.head
         target = object_views(st.planes.planes.detach(), now, posed, poses, cfg.object_silhouette,
-                              cfg.object_base_keep, cfg.object_halo, cfg.object_opaque, cfg.object_subpixel)
+                              cfg.object_base_keep, cfg.object_halo, cfg.object_opaque,
+                              subpixel_for(cfg.object_subpixel, cfg.plane_res))
         if target is not None:
             sub = object_config(cfg)
             alone = fit(target[0], now, sub, init_planes=st.planes.planes.detach(), hull=target[1],
