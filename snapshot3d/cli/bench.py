@@ -51,6 +51,13 @@ def _resolved(args, settings: dict):
     return args
 
 
+def _capture_shape(p, size: int) -> None:
+    """--size and --views of the synthetic captures (make-capture) that `bench capture-background` and `bench
+    capture-chain` fit."""
+    p.add_argument("--size", type=int, default=size, help="capture width in pixels (height 3/4 of it)")
+    p.add_argument("--views", type=int, default=48, help="capture frames (every 8th held out)")
+
+
 def _scene_sweep(p, scenes: str, scenes_help: str, hosts_help: str) -> None:
     """The options of a bench over scenes x hosts x simulated photos: --scenes, --hosts, --seeds, --size."""
     p.add_argument("--scenes", default=scenes, help=scenes_help)
@@ -101,8 +108,7 @@ def add_commands(sub) -> None:
     bg.add_argument("--meshes", default="spot", help="comma-separated built-in meshes")
     bg.add_argument("--modes", default="white,outer,masked", help="comma-separated fits: white, outer, masked, "
                     "masked-refine, outer-refine (with --refine-poses), and the candidates of docs/capture.md")
-    bg.add_argument("--size", type=int, default=128, help="capture width in pixels (height 3/4 of it)")
-    bg.add_argument("--views", type=int, default=48, help="capture frames (every 8th held out)")
+    _capture_shape(bg, size=128)
     bg.add_argument("--steps", type=int, default=300, help="fit steps")
     bg.add_argument("--occ-warmup", type=int, default=32, help="fit steps before the first occupancy update")
     bg.add_argument("--plane-res", type=int, default=64, help="plane resolution")
@@ -129,8 +135,7 @@ def add_commands(sub) -> None:
     bc.add_argument("--mesh", default="spot", help="built-in mesh the capture is made of")
     bc.add_argument("--modes", default="outer", help="comma-separated fits of bench capture-background (the photos' "
                     "fits: outer and its candidates), over the fit's defaults")
-    bc.add_argument("--size", type=int, default=160, help="capture width in pixels (height 3/4 of it)")
-    bc.add_argument("--views", type=int, default=48, help="capture frames (every 8th held out)")
+    _capture_shape(bc, size=160)
     bc.add_argument("--steps", type=int, default=400, help="fit steps per rung of the budget's ladder")
     bc.add_argument("--seed", type=int, default=0, help="capture seed")
     bc.add_argument("--fit-seed", type=int, default=0, help="fit seed")
