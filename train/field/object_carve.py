@@ -17,7 +17,8 @@ views of the fitted planes with every other cell skipped, over white, at the pos
 opaque its colour is the photo's (`photo_colours`): the planes of a fit with the ground in the box paint the ground's
 texture into the object's colour too (the plane over the floor is shared by every height), which the photo does not
 have. Their opacity is made solid about one half (`solid_cover`, cfg.object_opaque): where a ground of the object's
-colour lies behind, the fit leaves the object partly see-through, and a real object is opaque. The planes are then
+colour lies behind, the fit leaves the object partly see-through, and a real object is opaque; on a print's small
+planes on a grid finer than the pixels, so that the outline stays anti-aliased (`subpixel_for`, cfg.object_subpixel). The planes are then
 fitted to those views (from where
 they are, DISTIL_LR) with the object's cells as their hull: the rays skip the other cells and the empty-space
 penalty (`fit.empty_alpha`) drives their density to zero, so that the decode side, which finds its occupancy from
