@@ -24,7 +24,7 @@ from snapshot3d.train.field.config import FitConfig
 from .common import run_metadata, write_rows
 from .pose_error import pose_error
 
-__all__ = ["MODES", "fit_and_score", "bench_capture_background_command", "bench_fit_command"]
+__all__ = ["MODES", "fit_and_score", "int_list", "bench_capture_background_command", "bench_fit_command"]
 
 # the background model's regularisers, all off: --background outer as first landed
 PLAIN = {"distortion_weight": 0.0, "opacity_weight": 0.0, "opacity_entropy": False, "wall_weight": 0.0,
@@ -183,13 +183,16 @@ def _side_by_side(path: Path, scene, truth, photos: np.ndarray, renders: np.ndar
 
 def _fit_seeds(text: str | None, seed: int) -> list[int]:
     """--fit-seeds "0,1,2" -> [0, 1, 2]; None or "" -> [seed] (the capture's own); a one-line error otherwise."""
-    if not text:
-        return [seed]
+    return int_list(text, "--fit-seeds") if text else [seed]
+
+
+def int_list(text: str, option: str) -> list[int]:
+    """An option's "0,1,2" -> [0, 1, 2]; a one-line UserError naming `option` otherwise."""
     try:
         return [int(v) for v in text.split(",")]
     except ValueError:
         from snapshot3d.errors import UserError
-        raise UserError(f"--fit-seeds must be comma-separated integers, not {text!r}") from None
+        raise UserError(f"{option} must be comma-separated integers, not {text!r}") from None
 
 
 def bench_fit_command(args) -> int:

@@ -23,7 +23,7 @@ from snapshot3d.make_capture import make_capture
 from snapshot3d.make_capture_config import SynthCaptureConfig
 from snapshot3d.train.field.config import FitConfig
 
-from .capture_background import MODES
+from .capture_background import MODES, int_list
 from .common import median, run_metadata, write_rows
 
 __all__ = ["bench_capture_chain_command", "capture_truth", "chain_scores"]
@@ -111,10 +111,7 @@ def bench_capture_chain_command(args) -> int:
         if mode not in MODES or MODES[mode][0] != "transforms.json":
             raise UserError(f"--modes: unknown fit {mode!r} (choose from the photos' fits of bench "
                             f"capture-background: {', '.join(m for m, v in MODES.items() if v[0] == 'transforms.json')})")
-    try:
-        photo_seeds = [int(v) for v in args.photo_seeds.split(",")]
-    except ValueError:
-        raise UserError(f"--photo-seeds must be comma-separated integers, not {args.photo_seeds!r}") from None
+    photo_seeds = int_list(args.photo_seeds, "--photo-seeds")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cfg = FitConfig(steps=args.steps, seed=args.fit_seed)
