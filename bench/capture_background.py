@@ -45,6 +45,14 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-nobasekeep": ("transforms.json", "outer", "auto", {"object_base_keep": 0.0}),
          "outer-sweep": ("transforms.json", "outer", "auto", {"ground_sweep": True}),
          "outer-floor": ("transforms.json", "outer", "auto", {"floor_weight": 1.0}),
+         # the object fit's last 15% / 30% of steps through the print channel model's noise (--object-channel)
+         "outer-objchannel": ("transforms.json", "outer", "auto", {"object_channel": 0.15, "refit": "model"}),
+         "outer-objchannel-0.3": ("transforms.json", "outer", "auto", {"object_channel": 0.3, "refit": "model"}),
+         # the chosen rung of a print's ladder kept as fitted again from scratch (--refit always; auto since
+         # 2026-12-08), or only where the print channel's model expects it no worse (--refit model, auto before)
+         "outer-refit": ("transforms.json", "outer", "auto", {"refit": "always", "object_channel": 0.0}),
+         "outer-refit-model": ("transforms.json", "outer", "auto", {"refit": "model", "object_channel": 0.0}),
+         "outer-objchannel-refit": ("transforms.json", "outer", "auto", {"object_channel": 0.15, "refit": "always"}),
          "outer-noground": ("transforms.json", "outer", "auto", {"ground_texture": 0}),
          "outer-ground256": ("transforms.json", "outer", "auto", {"ground_texture": 256}),
          "outer-bg96": ("transforms.json", "outer", "auto", {"background_res": 96}),

@@ -1,4 +1,6 @@
 """`--budget auto` selection and marching-cubes meshing on known inputs."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -86,3 +88,19 @@ def test_the_print_ladder_fits_its_chosen_rung_again_from_scratch_and_keeps_the_
         assert rung["e2e_expected"] > refit["e2e_expected"]
     chosen, rungs = fit_ladder(posed, load_decoder(), cfg, ladder=[(24, 4), (16, 4)], tolerance_db=99.0, log=len)
     assert chosen == 1 and not any("refit" in r for r in rungs)
+
+
+def test_the_refit_is_kept_by_the_model_unless_the_fit_ends_on_the_object_alone():
+    """--refit auto keeps the chosen rung's fit from scratch where the model expects it no worse, and always for
+    the object alone (background model and --object-steps); model: by the model only; always: always."""
+    from snapshot3d.train.field.budget import refit_kept
+    from snapshot3d.train.field.config import FitConfig, check_fit_config
+
+    white, alone = FitConfig(background="white"), FitConfig(background="outer")
+    kept = {(refit, bg.background, again): refit_kept(replace(bg, refit=refit), again, 19.0)
+            for refit in ("auto", "model", "always") for bg in (white, alone) for again in (18.5, 19.0)}
+    assert [k for k, v in kept.items() if not v] == [("auto", "white", 18.5), ("model", "white", 18.5),
+                                                    ("model", "outer", 18.5)]
+    assert not refit_kept(replace(alone, object_steps=0.0), 18.5, 19.0)   # the room kept: by the model
+    with pytest.raises(UserError, match="--refit must be auto, model or always, not 'yes'"):
+        check_fit_config(FitConfig(refit="yes"))

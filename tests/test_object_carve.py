@@ -288,3 +288,26 @@ def test_the_refined_cameras_give_the_corrected_rays():
         got_o, got_d = view_rays(moved[v], intr, 32, 24, frame)
         torch.testing.assert_close(got_o.float(), want_o, rtol=1e-4, atol=1e-4)
         torch.testing.assert_close(got_d.float(), want_d, rtol=1e-4, atol=1e-4)
+
+
+def test_the_object_fit_runs_through_the_channel_only_as_asked():
+    """--object-channel F trains the object fit's last F of steps through the print channel's noise; 0 leaves it to
+    --channel-fraction, as before; auto is --qat-fraction for a print, else 0."""
+    from dataclasses import replace
+
+    from snapshot3d.errors import UserError
+    from snapshot3d.train.field.commands import resolve_autos
+    from snapshot3d.train.field.config import FitConfig, check_fit_config
+    from snapshot3d.train.field.object_carve import object_config
+
+    cfg = FitConfig(steps=100, background="outer", object_channel=0.0)
+    assert object_config(cfg).channel_fraction == 0.0
+    assert object_config(FitConfig(steps=100)).channel_fraction == 0.0   # auto left unresolved: off
+    assert object_config(replace(cfg, object_channel=0.15)).channel_fraction == 0.15
+    assert object_config(replace(cfg, channel_fraction=0.2)).channel_fraction == 0.2
+    assert [resolve_autos(FitConfig(qat_fraction=0.2), "nerfstudio", m).object_channel
+            for m in ("print", "file", None)] == [0.2, 0.0, 0.0]
+    assert resolve_autos(FitConfig(object_channel=0.3), "nerfstudio", "print").object_channel == 0.3   # given
+    for bad in (1.5, -0.5):
+        with pytest.raises(UserError, match=rf"--object-channel must be in \[0, 1\], or -1 \(auto\), not {bad}"):
+            check_fit_config(FitConfig(object_channel=bad))

@@ -64,14 +64,16 @@ def _default_orbit(posed) -> Orbit:
 
 
 def resolve_autos(cfg: FitConfig, layout: str | None, medium: str | None) -> FitConfig:
-    """cfg with its --head, --refine-poses and --bundle `auto` made on or off for an input of `layout` (the
-    loader's: nerfstudio, colmap, blender, builtin) and `medium` (print, file or None)."""
+    """cfg with its --head, --refine-poses, --bundle and --object-channel `auto` made on or off for an input of
+    `layout` (the loader's: nerfstudio, colmap, blender, builtin) and `medium` (print, file or None)."""
     if cfg.head == "auto":   # the QR code carries a print's head; a file's planes are large enough without one
         cfg = replace(cfg, head="on" if medium == "print" else "off")
     if cfg.refine_poses == "auto":   # poses from a solver or an app are a little off; builtin and Blender's are exact
         cfg = replace(cfg, refine_poses="on" if layout in ("nerfstudio", "colmap") else "off")
     if cfg.bundle == "auto":   # the photos' matches refine the poses first where the fit refines them
         cfg = replace(cfg, bundle="fit" if cfg.refine_poses == "on" else "off")
+    if cfg.object_channel == -1:   # the object alone's last phase through a print's noise (docs/capture.md)
+        cfg = replace(cfg, object_channel=cfg.qat_fraction if medium == "print" else 0.0)
     return cfg
 
 

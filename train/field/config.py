@@ -38,6 +38,11 @@ class FitConfig:
                                "(--qat-fraction) both plain and through the print channel model's noise, and keeps "
                                "the second where the model expects it at least 0.3 dB better at held-out views "
                                "(train/field/ending.py; not with --background outer); plain: the plain ending alone")
+    refit: str = config_field("auto", "with --budget auto --medium print: the chosen rung (fine-tuned from the "
+                              "largest) is fitted again from scratch; auto keeps that fit where the print channel's "
+                              "model expects it no worse, and always for the object alone (--background outer with "
+                              "--object-steps: fewer floaters, docs/capture.md); model: only where the model "
+                              "expects it no worse; always: keeps it")
     head: str = config_field("auto", "a head of the scene's own: the shared decoder's last layer refitted for this "
                              "scene and carried in its metadata (136 bytes for tri-dec-1; docs/fitting.md); auto: on "
                              "with --medium print, where the planes are small and the QR code carries it")
@@ -160,6 +165,10 @@ class FitConfig:
                                         "outline is anti-aliased as a camera's is; 1: on the pixels (a step); 0: "
                                         "auto, 4 where the planes are at most 32 texels a side (a print's small "
                                         "rungs), else 1 (docs/capture.md)")
+    object_channel: float = config_field(-1.0, "with --object-steps: the last fraction of the object fit's steps "
+                                         "trained through the print channel model's noise (as --channel-fraction); "
+                                         "0: as --channel-fraction says; -1: auto, --qat-fraction with --medium "
+                                         "print, else 0 (docs/capture.md)")
 
 
 @dataclass
@@ -205,6 +214,7 @@ def _ranges(cfg: FitConfig) -> list[tuple[str, bool, str]]:
         ("ground-depth", cfg.ground_depth >= 0 or cfg.ground_depth == -1, ">= 0, or -1 (where the ground is)"),
         ("ground-reach", 1 <= cfg.ground_reach <= 16, "in [1, 16]"),
         ("seen-ground-weight", cfg.seen_ground_weight >= 0 or cfg.seen_ground_weight == -1, ">= 0, or -1 (auto)"),
+        ("object-channel", 0 <= cfg.object_channel <= 1 or cfg.object_channel == -1, "in [0, 1], or -1 (auto)"),
         ("object-steps", 0 <= cfg.object_steps <= 4, "in [0, 4]"),
         ("object-box", 0 <= cfg.object_box <= 1, "in [0, 1]"),
         ("object-silhouette", 0 <= cfg.object_silhouette <= 1, "in [0, 1]"),
@@ -222,6 +232,7 @@ def check_fit_config(cfg: FitConfig) -> FitConfig:
     problems = [f"--{k} must be {what}, not {getattr(cfg, k.replace('-', '_'))!r}"
                 for k, ok, what in _ranges(cfg) if not ok]
     for option, value, allowed in (("ending", cfg.ending, ("auto", "plain")),
+                                   ("refit", cfg.refit, ("auto", "model", "always")),
                                    ("background", cfg.background, ("auto", "white", "outer")),
                                    ("refine-poses", cfg.refine_poses, ("auto", "on", "off")),
                                    ("bundle", cfg.bundle, ("auto", "fit", "box", "off")),

@@ -300,5 +300,5 @@ def object_config(cfg):
     the poses as they are."""
     steps = max(1, round(cfg.steps * cfg.object_steps))
     return replace(cfg, steps=steps, background="white", refine_poses="off", object_steps=0.0, random_background=True,
-                   lr=DISTIL_LR,
+                   channel_fraction=cfg.object_channel if cfg.object_channel > 0 else cfg.channel_fraction, lr=DISTIL_LR,
                    lr_final=min(cfg.lr_final, DISTIL_LR), occ_warmup=max(1, steps // 10))
