@@ -128,12 +128,11 @@ def object_alone(cfg: FitConfig) -> bool:
 
 def refit_kept(cfg: FitConfig, again: float, tuned: float) -> bool:
     """Whether the chosen rung fitted again from scratch is kept, its expected e2e `again` against the fine-tuned
-    rung's `tuned` (dB): --refit always; model: where it is expected no worse; auto: so, and always for the object
-    alone.
-    There the model, scored on the object's own pixels, does not see the outline: on four print chains the fit
-    from scratch left 0.19 to 0.84 points fewer floaters decoded and gained 0.34 to 1.10 dB of the whole view over
-    white, for 0.56 to 1.30 dB of the object in its mask (`bench capture-chain --modes outer-refit`;
-    `--object-channel` gives part of that back, docs/capture.md)."""
+    rung's `tuned` (dB). --refit always: kept; model: where it is expected no worse; auto: as model, and always for
+    the object alone. There the model, scored on the object's own pixels, does not see the outline: on four print
+    chains the fit from scratch left 0.19 to 0.84 points fewer floaters decoded and gained 0.34 to 1.10 dB of the
+    whole view over white, for 0.56 to 1.30 dB of the object in its mask (`bench capture-chain --modes
+    outer-refit`; `--object-channel` gives part of that back, docs/capture.md)."""
     return cfg.refit == "always" or (cfg.refit == "auto" and object_alone(cfg)) or again >= tuned
 
 

@@ -297,7 +297,8 @@ def band_vote(cells: np.ndarray, loose: np.ndarray | None, outside: np.ndarray, 
 def object_config(cfg):
     """The FitConfig of the fit to `object_views`: round(cfg.steps * cfg.object_steps) steps, each ray over a
     random colour (its target recomposited by the views' opacity), from DISTIL_LR down to cfg's last learning rate,
-    the poses as they are."""
+    the poses as they are; its last cfg.object_channel of steps through the print channel's noise (0 or auto left
+    unresolved: cfg.channel_fraction's)."""
     steps = max(1, round(cfg.steps * cfg.object_steps))
     return replace(cfg, steps=steps, background="white", refine_poses="off", object_steps=0.0, random_background=True,
                    channel_fraction=cfg.object_channel if cfg.object_channel > 0 else cfg.channel_fraction, lr=DISTIL_LR,
