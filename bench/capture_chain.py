@@ -7,7 +7,8 @@ the opacity outside the mask + 2 px, the whole view against the object over whit
 `bench capture-background`, whose fields go over the fit's defaults here, the poses as the defaults say).
 
 The world is the capture's (--up 0,0,1, as `bench capture-background`), so that the truth needs no turn; `fit`'s
---up auto finds nearly that on these captures. Writes NAME.json and NAME.csv: one row per fit and photo."""
+--up auto finds nearly that on these captures. Writes NAME.json and NAME.csv: one row per fit and photo; with
+--figure, NAME_MODE_side_by_side.png per fit (`chain_figure`)."""
 from __future__ import annotations
 
 import json
@@ -18,6 +19,8 @@ import time
 from dataclasses import asdict, replace
 from pathlib import Path
 
+import numpy as np
+
 from snapshot3d.capture import CaptureOptions
 from snapshot3d.make_capture import make_capture
 from snapshot3d.make_capture_config import SynthCaptureConfig
@@ -26,7 +29,7 @@ from snapshot3d.train.field.config import FitConfig
 from .capture_background import MODES, int_list
 from .common import median, run_metadata, write_rows
 
-__all__ = ["bench_capture_chain_command", "capture_truth", "chain_scores"]
+__all__ = ["bench_capture_chain_command", "capture_truth", "chain_figure", "chain_scores"]
 
 SCORED = ("object_psnr", "object_clean_psnr", "opacity_outside_2px", "opacity_outside", "white_psnr",
           "object_ring_psnr")
@@ -66,8 +69,28 @@ def chain_scores(scene, truth: tuple) -> dict:
     return {k: round(float(v), 4) for k, v in score.items()}
 
 
+def chain_figure(path: Path, cap: Path, truth: tuple, scenes: list, views: int = 2) -> None:
+    """PNG of `views` held-out frames, one per row: the capture's photo as read, the object alone over white (the
+    truth), then each of `scenes` (the fitted scene, then those decoded from each photo), rendered over white at the
+    frame's true pose with its own decoder head. Tiles (H, W, 3) RGB, the capture's size."""
+    import torch
+
+    from snapshot3d.images import contact_sheet, write_png
+    from snapshot3d.loaders import load_scene
+    from snapshot3d.train.field.decoder import scene_decoder
+    from snapshot3d.train.field.render import render_views
+
+    photos, clean, _ = truth
+    read = load_scene(str(cap / "transforms.json"), capture=CaptureOptions(up=(0.0, 0.0, 1.0)))
+    idx = photos.test[:views]
+    renders = [render_views(torch.from_numpy(s.planes()), scene_decoder(s), s.box, photos.c2w[idx],
+                            photos.intrinsics[idx], photos.width, photos.height) for s in scenes]
+    tiles = [t for k, i in enumerate(idx) for t in (read.images[i], clean.images[i], *(r[k] for r in renders))]
+    write_png(path, contact_sheet(np.stack(tiles), cols=2 + len(scenes)))
+
+
 def _one_fit(cap: Path, mode: str, cfg: FitConfig, work: Path, severity: str, photo_seeds: list[int],
-             truth: tuple) -> list[dict]:
+             truth: tuple, figure: Path | None = None) -> list[dict]:
     from snapshot3d.scene import save_scene
     from snapshot3d.train.field.commands import fit_scene
     from snapshot3d.viewer.decode import decode_scene
@@ -85,6 +108,7 @@ def _one_fit(cap: Path, mode: str, cfg: FitConfig, work: Path, severity: str, ph
     base = {"mode": mode, "fit_seed": cfg.seed, "planes": f"{scene.resolution}x{scene.channels}",
             "head": bool(scene.head), "fit_seconds": round(seconds, 1), "ladder": fitted.report.get("ladder")}
     rows = [{**base, "stage": "fitted", "photo_seed": None, **chain_scores(scene, truth)}]
+    scenes = [scene]
     for seed in photo_seeds:
         photo = work / f"{mode}_photo{seed}.jpg"
         _cli("simulate", str(work / f"{mode}_sheet.png"), "--severity", severity, "--seed", str(seed), "-o",
@@ -92,6 +116,9 @@ def _one_fit(cap: Path, mode: str, cfg: FitConfig, work: Path, severity: str, ph
         decoded = decode_scene(str(photo)).scene
         rows.append({**base, "stage": f"decoded_{severity}", "photo_seed": seed,
                      **chain_scores(decoded, truth)})
+        scenes.append(decoded)
+    if figure is not None:
+        chain_figure(figure, cap, truth, scenes)
     return rows
 
 
@@ -121,7 +148,8 @@ def bench_capture_chain_command(args) -> int:
         cap = make_capture(f"builtin:{args.mesh}", Path(tmp) / "cap", capcfg)
         truth = capture_truth(cap)
         for mode in modes:
-            for row in _one_fit(cap, mode, cfg, Path(tmp), args.severity, photo_seeds, truth):
+            figure = out / f"{args.name}_{mode}_side_by_side.png" if args.figure else None
+            for row in _one_fit(cap, mode, cfg, Path(tmp), args.severity, photo_seeds, truth, figure):
                 print(json.dumps({"mesh": args.mesh, **row}), flush=True)
                 rows.append({"mesh": args.mesh, **row})
     report = {"meta": run_metadata(), "fit": asdict(cfg), "capture": {**asdict(capcfg), "lens": list(capcfg.lens)},

@@ -469,3 +469,27 @@ def test_a_wider_ground_ends_the_rays_that_leave_through_the_box_s_sides():
     assert down.tolist() == [False, True, False]
     down, _ = floor_colour(floor, frame, o, d, t_out, hit, depth=0.5)   # reach 1: the floor alone, as before
     assert down.tolist() == [False, True, False]
+
+
+def test_the_chain_figure_shows_the_photo_the_truth_and_each_scene(capture, tmp_path):
+    """`bench capture-chain --figure`: per held-out frame a row of the capture's photo, the object alone over white,
+    and each scene rendered at the frame's true pose."""
+    import cv2
+
+    from snapshot3d.bench.capture_chain import capture_truth, chain_figure
+    from snapshot3d.images import to_uint8
+    from snapshot3d.loaders import load_scene
+    from snapshot3d.paths import asset
+
+    truth = capture_truth(capture)
+    scene = load_scene_file(asset("spot-print.s3d"))
+    chain_figure(tmp_path / "f.png", capture, truth, [scene, scene], views=2)
+    fig = cv2.imread(str(tmp_path / "f.png"))[..., ::-1]
+    photos, clean, _ = truth
+    h, w, first, rows = photos.height, photos.width, photos.test[0], len(photos.test[:2])
+    assert fig.shape == (rows * h, 4 * w, 3)
+    np.testing.assert_array_equal(fig[:h, :w], to_uint8(load_scene(str(capture / "transforms.json"),
+                                                                    capture=KEEP).images[first]))
+    np.testing.assert_array_equal(fig[:h, w:2 * w], to_uint8(clean.images[first]))
+    np.testing.assert_array_equal(fig[:, 2 * w:3 * w], fig[:, 3 * w:])   # the same scene twice
+    assert (fig[:, 2 * w:3 * w] < 200).any(1).sum() > 0.05 * rows * h   # the scene is drawn, not blank

@@ -142,6 +142,9 @@ def add_commands(sub) -> None:
     bc.add_argument("--severity", default="moderate", choices=SEVERITIES, help="simulate's severity")
     bc.add_argument("--photo-seeds", default="0,1,2", help="comma-separated simulate seeds, one photo each")
     bc.add_argument("--name", default="capture_chain", help="results file name (without .json/.csv)")
+    bc.add_argument("--figure", action="store_true", help="also NAME_MODE_side_by_side.png: held-out frames, each "
+                    "a row: the capture's photo, the object alone over white (the truth), the fitted scene and the "
+                    "scene decoded from each photo")
     _quick(bc, size=48, views=8, steps=20, photo_seeds="0")
 
     bs = add(bsub, "capture-summary", "issue 40's targets by the medians over fit seeds, from bench "
