@@ -40,7 +40,7 @@ MODES = {"white": ("transforms.json", "white", None, {}),
          "outer-nosilhouette": ("transforms.json", "outer", "auto", {"object_silhouette": 1.0}),
          "outer-silhouette-0.3": ("transforms.json", "outer", "auto", {"object_silhouette": 0.3}),
          # the floor band's vote looser (0.2 by default): spot's dark hooves over their shadow come back with it
-         # (docs/capture.md, "The hooves cut by the silhouettes' vote")
+         # (docs/capture-record.md, "The hooves cut by the silhouettes' vote")
          "outer-silhouette-0.5": ("transforms.json", "outer", "auto", {"object_silhouette": 0.5}),
          "outer-nobasekeep": ("transforms.json", "outer", "auto", {"object_base_keep": 0.0}),
          "outer-sweep": ("transforms.json", "outer", "auto", {"ground_sweep": True}),

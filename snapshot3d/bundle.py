@@ -14,7 +14,7 @@ ground's mirrored tiles match wrongly and agree with one another), and the next 
 
 On the 128x96 composites with 0.5 deg / 1% pose noise (`make-capture --pose-noise-*`), 42 frames: about 1,700 tracks
 and 2.5 s; the median pose error falls from 0.45 deg to 0.13-0.17 deg, and the teapot's sparse box holds the object
-(it cut through it before). Exact poses move by 0.07 deg (docs/capture.md, "A bundle adjustment before the box").
+(it cut through it before). Exact poses move by 0.07 deg (docs/capture-record.md, "A bundle adjustment before the box").
 """
 from __future__ import annotations
 

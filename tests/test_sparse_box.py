@@ -42,7 +42,7 @@ def test_the_ground_and_the_object_are_found_in_points_with_strays(rng):
 def test_a_ground_scattered_by_poses_a_little_off_is_found_in_a_wider_band(rng):
     # 8 cm rms in height, as 0.5 degrees of pose error gives: 12% of the floor lies more than three bands (1x) below
     # the plane, which refuses it; the band twice as wide holds it, and the plane of 3000 points lies within 2.5 cm
-    # (the object's lowest points in the band pull it up; 0.6 to 2.4 cm on the pose-noise composites, docs/capture.md)
+    # (the object's lowest points in the band pull it up; 0.6 to 2.4 cm on the pose-noise composites, docs/capture-record.md)
     pts = _points(rng, noise=0.08)
     assert find_ground(pts, FIRST, SparseBoxConfig(spread=(1,))) is None
     (a, b, c), on, band = find_ground(pts, FIRST)
@@ -114,7 +114,7 @@ def test_poses_half_a_degree_off_are_adjusted_before_the_box_which_then_holds_th
     adjustment (snapshot3d/bundle.py) brings the training poses at least a third nearer the true ones, and the
     sparse box at the adjusted poses finds the ground in the narrowest band, within 3% of the object's height, and
     holds the object's true box (at the given poses the ground passed only a band three times as wide, and the box
-    cut through the teapot, docs/capture.md)."""
+    cut through the teapot, docs/capture-record.md)."""
     from scipy.spatial.transform import Rotation
 
     from snapshot3d.capture import CaptureOptions

@@ -107,7 +107,7 @@ def add_commands(sub) -> None:
     _out(bg)
     bg.add_argument("--meshes", default="spot", help="comma-separated built-in meshes")
     bg.add_argument("--modes", default="white,outer,masked", help="comma-separated fits: white, outer, masked, "
-                    "masked-refine, outer-refine (with --refine-poses), and the candidates of docs/capture.md")
+                    "masked-refine, outer-refine (with --refine-poses), and the candidates of docs/capture-record.md")
     _capture_shape(bg, size=128)
     bg.add_argument("--steps", type=int, default=300, help="fit steps")
     bg.add_argument("--occ-warmup", type=int, default=32, help="fit steps before the first occupancy update")

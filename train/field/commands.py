@@ -29,11 +29,11 @@ __all__ = ["Fitted", "fit_scene", "resolve_autos", "fit_command", "render_comman
 
 # --refine-poses auto on poses adjusted to the photos' matches: the corrections start at half the steps at the
 # earliest (refined early, on planes still blurred, they move away from the truth; 7 noisy composites x 3 fits,
-# docs/capture.md "The late start, side by side")
+# docs/capture-record.md "The late start, side by side")
 ADJUSTED_POSE_START = 0.5
 # --seen-ground-weight auto: this weight where the training cameras span less than SEEN_GROUND_SPAN_DEG of azimuth
 # round the box (at 120 deg: floaters 7 of 7 under 2%; at 240 deg: -0.4 dB, the teapot's floaters 2.19% -> 0.96%;
-# on two full turns it cost 0.4-2.6 dB and took no floaters away; docs/capture.md "The rays that show the ground")
+# on two full turns it cost 0.4-2.6 dB and took no floaters away; docs/capture-record.md "The rays that show the ground")
 SEEN_GROUND_WEIGHT = 0.3
 SEEN_GROUND_SPAN_DEG = 300.0
 

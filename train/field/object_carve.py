@@ -173,7 +173,7 @@ def subpixel_for(setting: int, plane_res: int) -> int:
     SUBPIXEL on planes of at most COARSE_RES texels a side, whose coarse field, fitted to a step at the outline,
     spills past it (the chain's 16x4 scenes: 2.03-2.12% of their opacity outside the mask + 2 px with the step,
     1.49-1.74% with the grid 4 times finer), and 1 on finer planes, where the step keeps more of the object in its
-    mask (docs/capture.md, "The outline made solid on a finer grid")."""
+    mask (docs/capture-record.md, "The outline made solid on a finer grid")."""
     if setting > 0:
         return setting
     return SUBPIXEL if plane_res <= COARSE_RES else 1
@@ -276,7 +276,7 @@ def halo_vote(cells: np.ndarray, core: np.ndarray, outside: np.ndarray, share: f
     bool: the core's cells as they are, the cells growing added where they are outside in at most `share` of their
     views. Growing keeps thin parts that are not solid (a spout, a knob), which the photos show, and the haze the
     fit paints round the outline, which they do not; on spot's and the teapot's arcs the vote also cut the object's
-    outer skin (-1.5 and -2.2 dB, docs/capture.md, "The edge that is too wide"), so fit --object-halo is off."""
+    outer skin (-1.5 and -2.2 dB, docs/capture-record.md, "The edge that is too wide"), so fit --object-halo is off."""
     return cells & (core | (outside <= share))
 
 
