@@ -90,17 +90,44 @@ def test_the_print_ladder_fits_its_chosen_rung_again_from_scratch_and_keeps_the_
     assert chosen == 1 and not any("refit" in r for r in rungs)
 
 
-def test_the_refit_is_kept_by_the_model_unless_the_fit_ends_on_the_object_alone():
-    """--refit auto keeps the chosen rung's fit from scratch where the model expects it no worse, and always for
-    the object alone (background model and --object-steps); model: by the model only; always: always."""
+def test_the_refit_is_kept_by_the_model_or_for_the_object_alone_by_its_floaters():
+    """--refit auto keeps the chosen rung's fit from scratch where the model expects it no worse, and for the
+    object alone (background model and --object-steps) also where it leaves less opacity outside the largest
+    rung's outline; model: by the model only; always: always."""
     from snapshot3d.train.field.budget import refit_kept
     from snapshot3d.train.field.config import FitConfig, check_fit_config
 
     white, alone = FitConfig(background="white"), FitConfig(background="outer")
-    kept = {(refit, bg.background, again): refit_kept(replace(bg, refit=refit), again, 19.0)
-            for refit in ("auto", "model", "always") for bg in (white, alone) for again in (18.5, 19.0)}
-    assert [k for k, v in kept.items() if not v] == [("auto", "white", 18.5), ("model", "white", 18.5),
-                                                    ("model", "outer", 18.5)]
-    assert not refit_kept(replace(alone, object_steps=0.0), 18.5, 19.0)   # the room kept: by the model
+    fewer, more = {"tuned": 0.02, "again": 0.01}, {"tuned": 0.01, "again": 0.03}
+    kept = {(refit, bg.background, again, f is fewer): refit_kept(replace(bg, refit=refit), again, 19.0, f)
+            for refit in ("auto", "model", "always") for bg in (white, alone) for again in (18.5, 19.0)
+            for f in (fewer, more)}
+    lost = [k for k, v in kept.items() if not v]
+    assert lost == [("auto", "white", 18.5, True), ("auto", "white", 18.5, False), ("auto", "outer", 18.5, False),
+                    ("model", "white", 18.5, True), ("model", "white", 18.5, False),
+                    ("model", "outer", 18.5, True), ("model", "outer", 18.5, False)]
+    assert not refit_kept(alone, 18.5, 19.0, None)   # no opacity measured (the room kept): by the model
     with pytest.raises(UserError, match="--refit must be auto, model or always, not 'yes'"):
         check_fit_config(FitConfig(refit="yes"))
+
+
+def test_the_refit_s_floaters_are_both_rungs_opacity_outside_the_largest_rung_s_outline():
+    """refit_floaters: opacity within 2 px of the largest rung's outline is forgiven, farther out it counts, and a
+    fit that does not end on the object alone measures nothing."""
+    from snapshot3d.train.field.budget import refit_floaters
+    from snapshot3d.train.field.config import FitConfig
+    from snapshot3d.train.field.object_score import opacity_outside
+
+    masks = np.zeros((1, 20, 20), bool)
+    masks[0, 5:15, 5:15] = True
+    inside = masks.astype(np.float32)
+    far, near = inside.copy(), inside.copy()
+    far[0, 0, 0] = 0.5           # 5 px from the outline
+    near[0, 16, 10] = 0.5        # 2 px from it
+    rungs = [{"_opacity": inside, "_masks": masks}, {"_opacity": far}, {"_opacity": near}]
+    got = refit_floaters(FitConfig(background="outer"), *rungs)
+    assert got == {"tuned": round(0.5 / 100.5, 4), "again": 0.0}
+    assert refit_floaters(FitConfig(background="white"), *rungs) is None
+    assert refit_floaters(FitConfig(background="outer", object_steps=0.0), *rungs) is None
+    assert opacity_outside(near, masks, grow=0) == pytest.approx(0.5 / 100.5, rel=1e-6, abs=1e-9)
+    assert opacity_outside(np.zeros_like(inside), masks) == 0.0

@@ -35,6 +35,7 @@ from .ending import Ending, ending_noise, ending_views
 from .evaluate import evaluate_planes
 from .fit import fit, hull_grid
 from .head import with_head
+from .object_score import opacity_outside
 
 __all__ = ["fit_ladder", "choose_rung", "codec_psnr", "expected_e2e", "codec_share", "ladder_for", "print_channel",
            "predicted_e2e", "CURVES_FILE", "PREDICT_HOSTS"]
@@ -108,16 +109,17 @@ def fit_ladder(posed: PosedImages, decoder, cfg: FitConfig, ladder=None, toleran
     if channel is not None and chosen > 0:   # the chosen rung from scratch: its fine-tune starts from a poorer point
         rung = rungs[chosen]
         again, _ = rung_fit(rung["plane_res"], rung["plane_channels"], None, 1.0, " from scratch")
-        kept = refit_kept(cfg, again["e2e_expected"], rung["e2e_expected"])
+        floaters = refit_floaters(cfg, rungs[0], rung, again)
+        kept = refit_kept(cfg, again["e2e_expected"], rung["e2e_expected"], floaters)
         refit = {"field_psnr": again["field_psnr"], "e2e_expected": again["e2e_expected"], "kept": kept,
-                 "fit_seconds": again["fit_seconds"]}
+                 "fit_seconds": again["fit_seconds"], **({"floaters": floaters} if floaters else {})}
         rungs[chosen] = {**(again if kept else rung), "refit": refit,
                          "fit_seconds": round(rung["fit_seconds"] + again["fit_seconds"], 1)}
         log(f"ladder R={rung['plane_res']} C={rung['plane_channels']} again from scratch: field_psnr "
             f"{again['field_psnr']:.2f} dB, e2e expected {again['e2e_expected']:.2f} dB "
             f"({'kept' if kept else 'not kept'}: the fine-tuned rung expected {rung['e2e_expected']:.2f}"
-            f"{'; the object alone keeps it' if kept and object_alone(cfg) else ''}), "
-            f"{again['fit_seconds']:.0f} s")
+            + (f"; opacity outside the largest rung's outline {floaters['again']:.2%} against {floaters['tuned']:.2%}"
+               if floaters else "") + f"), {again['fit_seconds']:.0f} s")
     return chosen, rungs
 
 
@@ -126,14 +128,27 @@ def object_alone(cfg: FitConfig) -> bool:
     return cfg.background == "outer" and cfg.object_steps > 0
 
 
-def refit_kept(cfg: FitConfig, again: float, tuned: float) -> bool:
+def refit_floaters(cfg: FitConfig, largest: dict, tuned: dict, again: dict) -> dict | None:
+    """For the object alone (`object_alone`): the share of the fine-tuned and the from-scratch rungs' opacity at the
+    held-out views outside the largest rung's outline (its opacity >= one half) grown by 2 px, as {"tuned": share,
+    "again": share}; None for any other fit (no opacity kept)."""
+    if not object_alone(cfg) or any("_opacity" not in r for r in (largest, tuned, again)):
+        return None
+    return {k: round(opacity_outside(r["_opacity"], largest["_masks"]), 4) for k, r in (("tuned", tuned),
+                                                                                     ("again", again))}
+
+
+def refit_kept(cfg: FitConfig, again: float, tuned: float, floaters: dict | None = None) -> bool:
     """Whether the chosen rung fitted again from scratch is kept, its expected e2e `again` against the fine-tuned
-    rung's `tuned` (dB). --refit always: kept; model: where it is expected no worse; auto: as model, and always for
-    the object alone. There the model, scored on the object's own pixels, does not see the outline: on four print
-    chains the fit from scratch left 0.19 to 0.84 points fewer floaters decoded and gained 0.34 to 1.10 dB of the
-    whole view over white, for 0.56 to 1.30 dB of the object in its mask (`bench capture-chain --modes
-    outer-refit`; `--object-channel` gives part of that back, docs/capture.md)."""
-    return cfg.refit == "always" or (cfg.refit == "auto" and object_alone(cfg)) or again >= tuned
+    rung's `tuned` (dB). --refit always: kept; model: where it is expected no worse; auto: as model, and for the
+    object alone also where it leaves less opacity outside the largest rung's outline (`refit_floaters`). The
+    model, scored on the object's own pixels, does not see the outline: on spot's print chains the fit from scratch
+    left 0.19 to 0.84 points fewer floaters decoded, where on the bunny's it left 3 points more
+    (docs/capture-record.md, "The chosen rung fitted from scratch")."""
+    if cfg.refit == "always" or again >= tuned:
+        return True
+    return (cfg.refit == "auto" and object_alone(cfg) and floaters is not None
+            and floaters["again"] < floaters["tuned"])
 
 
 class _RungFit:
@@ -171,6 +186,8 @@ class _RungFit:
                 "field_psnr": round(ev["field_psnr"], 3), "field_ssim": round(ev["field_ssim"], 4),
                 "fit_seconds": round(seconds, 1), "codes": res_.codes, "head": res_.head,
                 **({"ending": res_.ending} if res_.ending else {})}
+        if "opacity" in ev:   # the planes' own opacity at the held-out views, for the refit's floaters (fit_ladder)
+            rung.update(_opacity=ev["opacity"], _masks=ev["masks"])
         if self.medium is not None:
             c = codec_psnr(self.medium, int(res_.codes.size))
             rung.update(codec_psnr=round(c, 3), e2e_expected=round(expected_e2e(ev["field_psnr"], c), 3))

@@ -40,8 +40,9 @@ class FitConfig:
                                "(train/field/ending.py; not with --background outer); plain: the plain ending alone")
     refit: str = config_field("auto", "with --budget auto --medium print: the chosen rung (fine-tuned from the "
                               "largest) is fitted again from scratch; auto keeps that fit where the print channel's "
-                              "model expects it no worse, and always for the object alone (--background outer with "
-                              "--object-steps: fewer floaters, docs/capture.md); model: only where the model "
+                              "model expects it no worse, and for the object alone (--background outer with "
+                              "--object-steps) also where it leaves less opacity outside the largest rung's outline "
+                              "at the held-out views (fewer floaters, docs/capture.md); model: only where the model "
                               "expects it no worse; always: keeps it")
     head: str = config_field("auto", "a head of the scene's own: the shared decoder's last layer refitted for this "
                              "scene and carried in its metadata (136 bytes for tri-dec-1; docs/fitting.md); auto: on "

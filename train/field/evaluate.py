@@ -38,8 +38,8 @@ def evaluate_planes(planes: np.ndarray, decoder, posed: PosedImages, views=None,
     """Render the test views (default `posed.test`) from planes (3, C, R, R) float32; mean PSNR/SSIM. With
     `background` (an OuterField and its `samples` per segment): rendered in front of it and scored on the pixels
     of `masks` (V, H, W) bool, by default where these planes' opacity >= OBJECT_OPACITY (returned as "masks");
-    its field_ssim is then the whole view's, background included. `with_ssim` False: no field_ssim (a PSNR-only
-    score, as the print budget's predictions need)."""
+    its field_ssim is then the whole view's, background included, and "opacity" (V, H, W) is the planes' own.
+    `with_ssim` False: no field_ssim (a PSNR-only score, as the print budget's predictions need)."""
     views = posed.test if views is None else views
     device = next(decoder.parameters()).device
     p = torch.from_numpy(planes).to(device)
@@ -52,7 +52,8 @@ def evaluate_planes(planes: np.ndarray, decoder, posed: PosedImages, views=None,
     masks = acc >= OBJECT_OPACITY if masks is None else masks
     scores = [-10 * np.log10(max(float(((a - g) ** 2)[m].mean()), 1e-10)) if m.any() else 0.0
               for a, g, m in zip(pred, gt, masks)]
-    return {"field_psnr": float(np.mean(scores)), "renders": pred, "masks": masks, **_ssim(pred, gt, with_ssim)}
+    return {"field_psnr": float(np.mean(scores)), "renders": pred, "masks": masks, "opacity": acc,
+            **_ssim(pred, gt, with_ssim)}
 
 
 def _ssim(pred: np.ndarray, gt: np.ndarray, wanted: bool) -> dict:

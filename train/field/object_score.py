@@ -13,8 +13,8 @@ from .field import decode, sample_planes
 from .render import occupancy_from_planes, render_pixels, render_rays
 from .sampler import BoxFrame
 
-__all__ = ["score_object", "outline_split", "inner_mask", "edge_split", "ground_pixels", "clean_ceiling",
-           "density_share_outside_box"]
+__all__ = ["score_object", "opacity_outside", "outline_split", "inner_mask", "edge_split", "ground_pixels",
+           "clean_ceiling", "density_share_outside_box"]
 
 RING_PX = 2   # the outline's ring: the true mask's pixels within this many pixels of its edge
 NEAR_GROUND = 2.0   # the ground near the object: its footprint (the true box's) this many times as wide about its centre
@@ -104,6 +104,17 @@ def density_share_outside_box(planes: torch.Tensor, decoder, box, true_box, res:
 
 
 @torch.no_grad()
+def opacity_outside(acc: np.ndarray, masks: np.ndarray, grow: int = 2) -> float:
+    """acc (V, H, W) opacity in [0, 1], masks (V, H, W) bool -> the share of the opacity summed over all the views'
+    pixels that falls outside the masks grown by `grow` pixels (a square of side 2 grow + 1); 0 with no opacity."""
+    kernel = np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)
+    near = total = 0.0
+    for a, m in zip(acc, masks):
+        grown = cv2.dilate(m.astype(np.uint8), kernel) > 0 if grow > 0 else m.astype(bool)
+        near, total = near + float(a[grown].sum()), total + float(a.sum())
+    return float(1 - near / total) if total > 0 else 0.0
+
+
 def score_object(planes: torch.Tensor, decoder, box, truth: PosedImages, true_box, views=None,
                  chunk: int = 8192, clean: PosedImages | None = None) -> dict:
     """planes (3, C, R, R) over world `box` (2, 3), rendered over white at `views` (default truth.test) of `truth`
